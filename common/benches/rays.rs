@@ -1,0 +1,163 @@
+//! Ray throughput: `cargo bench -p photonfarm-common --bench rays`.
+//!
+//! Prints, per scene, single-thread figures (so "per core"): closest-hit camera rays per second,
+//! a path-tracing mix of rays (camera, diffuse bounce, shadow) per second, and path-traced
+//! samples per second; medians of 5 runs taken in one process. Scenes: the Cornell box and a
+//! generated bumpy sphere of 131,072 triangles loaded from a binary PLY file.
+
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+use glam::Vec2;
+use photonfarm::geometry::Frame;
+use photonfarm::integrator::path::PathSettings;
+use photonfarm::render::{RenderSettings, render_passes};
+use photonfarm::sampling::{Sampler, Stream, square_to_cosine_hemisphere};
+use photonfarm::scene::Scene;
+
+const RUNS: usize = 5;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// A lat-long sphere with a bumpy radius, as a binary little-endian PLY.
+fn write_bumpy_sphere(path: &Path, rings: u32, segments: u32) -> usize {
+    let mut verts = Vec::new();
+    for i in 0..=rings {
+        let theta = std::f32::consts::PI * i as f32 / rings as f32;
+        for j in 0..segments {
+            let phi = 2.0 * std::f32::consts::PI * j as f32 / segments as f32;
+            let r = 0.45 * (1.0 + 0.06 * (13.0 * theta).sin() * (17.0 * phi).sin());
+            verts.push([
+                r * theta.sin() * phi.cos(),
+                -0.5 + r * theta.cos(),
+                r * theta.sin() * phi.sin(),
+            ]);
+        }
+    }
+    let mut faces = Vec::new();
+    for i in 0..rings {
+        for j in 0..segments {
+            let a = i * segments + j;
+            let b = i * segments + (j + 1) % segments;
+            let (c, d) = (a + segments, b + segments);
+            faces.push([a, c, b]);
+            faces.push([b, c, d]);
+        }
+    }
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    write!(
+        f,
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        verts.len(),
+        faces.len()
+    )
+    .unwrap();
+    for v in &verts {
+        for c in v {
+            f.write_all(&c.to_le_bytes()).unwrap();
+        }
+    }
+    for t in &faces {
+        f.write_all(&[3u8]).unwrap();
+        for i in t {
+            f.write_all(&(*i as i32).to_le_bytes()).unwrap();
+        }
+    }
+    faces.len()
+}
+
+/// Camera rays, then for each hit one cosine-distributed bounce and one shadow ray to a light.
+fn ray_mix(scene: &Scene, pass: u64) -> (u64, u64) {
+    let (mut primary, mut total) = (0u64, 0u64);
+    for y in 0..scene.height() {
+        for x in 0..scene.width() {
+            let mut s = Sampler::new(1, Stream::Camera, pass, (y * scene.width() + x) as u64);
+            let ray = scene.camera.generate_ray(x, y, s.next_2d(), Vec2::ZERO);
+            primary += 1;
+            total += 1;
+            let Some((_, sp)) = scene.intersect(&ray) else {
+                continue;
+            };
+            let frame = Frame::from_normal(sp.ns);
+            let w = frame.to_world(square_to_cosine_hemisphere(s.next_2d()));
+            let _ = scene.intersect(&Scene::spawn_ray(&sp, w));
+            total += 1;
+            if let Some((_, ls)) = scene.sample_light(sp.p, s.next_1d(), s.next_2d()) {
+                let _ = scene.unoccluded(&sp, &ls);
+                total += 1;
+            }
+        }
+    }
+    (primary, total)
+}
+
+fn primary_rays(scene: &Scene, pass: u64) -> u64 {
+    let mut n = 0;
+    for y in 0..scene.height() {
+        for x in 0..scene.width() {
+            let mut s = Sampler::new(1, Stream::Camera, pass, (y * scene.width() + x) as u64);
+            let ray = scene.camera.generate_ray(x, y, s.next_2d(), Vec2::ZERO);
+            std::hint::black_box(scene.intersect(&ray));
+            n += 1;
+        }
+    }
+    n
+}
+
+fn bench(name: &str, scene: &Scene) {
+    let mut primary = Vec::new();
+    let mut mix = Vec::new();
+    let mut paths = Vec::new();
+    let settings = RenderSettings {
+        seed: 0,
+        path: PathSettings::from_scene(scene),
+    };
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    for run in 0..RUNS as u64 {
+        let t = Instant::now();
+        let n = primary_rays(scene, run);
+        primary.push(n as f64 / t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let (_, n) = ray_mix(scene, run);
+        mix.push(n as f64 / t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        pool.install(|| render_passes(scene, &settings, run..run + 1));
+        paths.push((scene.width() * scene.height()) as f64 / t.elapsed().as_secs_f64());
+    }
+    println!(
+        "{name:<28} camera rays {:>6.2} M/s/core | ray mix {:>6.2} M/s/core | path samples {:>6.3} M/s/core",
+        median(primary) / 1e6,
+        median(mix) / 1e6,
+        median(paths) / 1e6
+    );
+}
+
+fn main() {
+    let refs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs");
+    let res = [("res".to_string(), "256".to_string())];
+    let cbox = Scene::load(&refs.join("cbox.xml"), &res).unwrap();
+    bench("cbox (36 triangles)", &cbox);
+
+    let dir = tempfile::tempdir().unwrap();
+    let tris = write_bumpy_sphere(&dir.path().join("bumpy.ply"), 256, 256);
+    let text = std::fs::read_to_string(refs.join("cbox.xml")).unwrap();
+    let start = text.find("<shape type=\"cube\" id=\"small-box\">").unwrap();
+    let text = format!(
+        "{}<shape type=\"ply\"><string name=\"filename\" value=\"bumpy.ply\"/><ref id=\"white\"/></shape>\n</scene>\n",
+        &text[..start]
+    );
+    let path = dir.path().join("bumpy.xml");
+    std::fs::write(&path, text).unwrap();
+    let t = Instant::now();
+    let mesh = Scene::load(&path, &res).unwrap();
+    println!(
+        "bumpy sphere: {tris} triangles, loaded and BVH built in {:.3} s",
+        t.elapsed().as_secs_f64()
+    );
+    bench(&format!("bumpy sphere ({}k triangles)", tris / 1000), &mesh);
+}

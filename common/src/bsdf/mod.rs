@@ -1,0 +1,154 @@
+//! Scattering functions. All work in the local shading frame (normal = +z), in Mitsuba's
+//! convention: `wi` points towards where the path came from, `wo` is the sampled or queried
+//! direction, and `eval` includes the cosine of `wo`.
+
+mod conductor;
+mod dielectric;
+mod diffuse;
+pub mod fresnel;
+pub mod microfacet;
+mod plastic;
+
+pub use conductor::Conductor;
+pub use dielectric::Dielectric;
+pub use diffuse::Diffuse;
+pub use microfacet::Ggx;
+pub use plastic::Plastic;
+
+use glam::{Vec2, Vec3A};
+
+use crate::color::Rgb;
+
+/// Which quantity a path carries: camera paths carry radiance, photons carry importance's
+/// adjoint (power). Refraction scales the two differently.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransportMode {
+    /// Camera paths.
+    Radiance,
+    /// Light paths (photons).
+    Importance,
+}
+
+/// A sampled direction.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfSample {
+    /// The direction, in the local frame.
+    pub wo: Vec3A,
+    /// f · |cos θo| / pdf: what the throughput is multiplied by.
+    pub weight: Rgb,
+    /// Density per unit solid angle (for a delta lobe, the lobe's selection probability).
+    pub pdf: f32,
+    /// Whether the direction came from a delta (perfectly specular) lobe.
+    pub delta: bool,
+    /// Relative index of refraction crossed (1 for reflection), for Russian roulette.
+    pub eta: f32,
+}
+
+/// A material, as the scene declares it.
+#[derive(Clone, Debug)]
+pub enum Bsdf {
+    /// Lambertian.
+    Diffuse(Diffuse),
+    /// Smooth or rough metal.
+    Conductor(Conductor),
+    /// Smooth glass.
+    Dielectric(Dielectric),
+    /// Smooth or rough coated diffuse.
+    Plastic(Box<Plastic>),
+    /// Linear blend of two materials: (1 - weight) · first + weight · second.
+    Blend(Box<(Bsdf, Bsdf)>, f32),
+    /// Front material and back material (Mitsuba's `twosided`).
+    TwoSided(Box<(Bsdf, Bsdf)>),
+}
+
+impl Bsdf {
+    /// Samples `wo` given `wi`. `u1` chooses a lobe, `u2` the direction within it.
+    pub fn sample(&self, wi: Vec3A, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        match self {
+            Bsdf::Diffuse(b) => b.sample(wi, u2),
+            Bsdf::Conductor(b) => b.sample(wi, u2),
+            Bsdf::Dielectric(b) => b.sample(wi, u1, mode),
+            Bsdf::Plastic(b) => b.sample(wi, u1, u2),
+            Bsdf::Blend(pair, w) => {
+                let (first, second) = (&pair.0, &pair.1);
+                let (chosen, u1) = if u1 >= *w {
+                    (first, (u1 - w) / (1.0 - w))
+                } else {
+                    (second, u1 / w)
+                };
+                let s = chosen.sample(wi, u1.min(1.0 - f32::EPSILON), u2, mode)?;
+                if s.delta {
+                    // The choice probability cancels against the blend weight.
+                    return Some(s);
+                }
+                // A smooth direction could have come from either lobe: use the mixture density.
+                let pdf = self.pdf(wi, s.wo);
+                (pdf > 0.0).then(|| BsdfSample {
+                    weight: self.eval(wi, s.wo) / pdf,
+                    pdf,
+                    ..s
+                })
+            }
+            Bsdf::TwoSided(pair) => {
+                if wi.z >= 0.0 {
+                    pair.0.sample(wi, u1, u2, mode)
+                } else {
+                    let flip = Vec3A::new(1.0, 1.0, -1.0);
+                    let s = pair.1.sample(wi * flip, u1, u2, mode)?;
+                    Some(BsdfSample { wo: s.wo * flip, ..s })
+                }
+            }
+        }
+    }
+
+    /// f(wi, wo) · |cos θo| of the non-delta lobes.
+    pub fn eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+        match self {
+            Bsdf::Diffuse(b) => b.eval(wi, wo),
+            Bsdf::Conductor(b) => b.eval(wi, wo),
+            Bsdf::Dielectric(_) => Rgb::ZERO,
+            Bsdf::Plastic(b) => b.eval(wi, wo),
+            Bsdf::Blend(pair, w) => (1.0 - w) * pair.0.eval(wi, wo) + *w * pair.1.eval(wi, wo),
+            Bsdf::TwoSided(pair) => {
+                let flip = Vec3A::new(1.0, 1.0, -1.0);
+                if wi.z >= 0.0 {
+                    pair.0.eval(wi, wo)
+                } else {
+                    pair.1.eval(wi * flip, wo * flip)
+                }
+            }
+        }
+    }
+
+    /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes.
+    pub fn pdf(&self, wi: Vec3A, wo: Vec3A) -> f32 {
+        match self {
+            Bsdf::Diffuse(b) => b.pdf(wi, wo),
+            Bsdf::Conductor(b) => b.pdf(wi, wo),
+            Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Plastic(b) => b.pdf(wi, wo),
+            Bsdf::Blend(pair, w) => (1.0 - w) * pair.0.pdf(wi, wo) + w * pair.1.pdf(wi, wo),
+            Bsdf::TwoSided(pair) => {
+                let flip = Vec3A::new(1.0, 1.0, -1.0);
+                if wi.z >= 0.0 {
+                    pair.0.pdf(wi, wo)
+                } else {
+                    pair.1.pdf(wi * flip, wo * flip)
+                }
+            }
+        }
+    }
+
+    /// Whether any lobe is not a delta: only then do light sampling and photon gathering see it.
+    pub fn has_smooth(&self) -> bool {
+        match self {
+            Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Conductor(c) => c.roughness.is_some(),
+            Bsdf::Dielectric(_) => false,
+            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_smooth() || pair.1.has_smooth(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

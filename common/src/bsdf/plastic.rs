@@ -1,0 +1,204 @@
+use std::f32::consts::FRAC_1_PI;
+
+use glam::{Vec2, Vec3A};
+
+use super::BsdfSample;
+use super::fresnel::{diffuse_fresnel_reflectance, fresnel_dielectric, reflect, reflect_about};
+use super::microfacet::Ggx;
+use crate::color::{Rgb, mean};
+use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
+
+/// Diffuse base under a dielectric coating (Mitsuba's `plastic` and `roughplastic`).
+///
+/// Light either reflects off the coating (Fresnel-weighted, smooth or GGX) or enters it,
+/// scatters diffusely with internal reflections at the coating, and leaves again.
+#[derive(Clone, Debug)]
+pub struct Plastic {
+    /// Albedo of the base.
+    pub diffuse: Rgb,
+    /// Tint of the coating's reflection.
+    pub specular: Rgb,
+    /// Coating over exterior index of refraction.
+    pub eta: f32,
+    /// Mitsuba's `nonlinear`: account for the darkening of the base's colour by internal
+    /// reflections.
+    pub nonlinear: bool,
+    /// None for the smooth coating.
+    pub roughness: Option<Ggx>,
+    /// Probability weight of sampling the coating, from the mean reflectances (as Mitsuba).
+    specular_weight: f32,
+    /// Fraction of the diffuse light that the coating reflects back inside.
+    internal_reflectance: f32,
+    /// Rough coating only: transmittance into the coating against cos θ, 0..=1 in equal steps.
+    transmittance_table: Vec<f32>,
+}
+
+const TABLE_SIZE: usize = 64;
+
+impl Plastic {
+    /// A plastic; for a rough coating, its transmittance is integrated numerically here.
+    pub fn new(diffuse: Rgb, specular: Rgb, eta: f32, nonlinear: bool, roughness: Option<Ggx>) -> Self {
+        let (d, s) = (mean(diffuse), mean(specular));
+        let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
+        let (internal_reflectance, transmittance_table) = match roughness {
+            None => (diffuse_fresnel_reflectance(1.0 / eta), Vec::new()),
+            Some(ggx) => {
+                let table: Vec<f32> = (0..TABLE_SIZE)
+                    .map(|i| {
+                        let mu = (i as f32 / (TABLE_SIZE - 1) as f32).max(1e-3);
+                        1.0 - rough_albedo(ggx, eta, mu)
+                    })
+                    .collect();
+                // Internal: light leaving the base sees the coating from inside (eta inverted).
+                let n = 64;
+                let mut avg = 0.0;
+                for i in 0..n {
+                    let mu = (i as f32 + 0.5) / n as f32;
+                    avg += 2.0 * mu * rough_albedo(ggx, 1.0 / eta, mu) / n as f32;
+                }
+                (avg, table)
+            }
+        };
+        Plastic {
+            diffuse,
+            specular,
+            eta,
+            nonlinear,
+            roughness,
+            specular_weight,
+            internal_reflectance,
+            transmittance_table,
+        }
+    }
+
+    /// Fraction of light arriving at cos θ that passes the coating.
+    fn transmittance(&self, cos: f32) -> f32 {
+        if self.roughness.is_none() {
+            return 1.0 - fresnel_dielectric(cos, self.eta).0;
+        }
+        let x = cos.clamp(0.0, 1.0) * (TABLE_SIZE - 1) as f32;
+        let i = (x as usize).min(TABLE_SIZE - 2);
+        let f = x - i as f32;
+        self.transmittance_table[i] * (1.0 - f) + self.transmittance_table[i + 1] * f
+    }
+
+    fn diffuse_eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+        let base = if self.nonlinear {
+            self.diffuse / (Rgb::ONE - self.diffuse * self.internal_reflectance)
+        } else {
+            self.diffuse / (1.0 - self.internal_reflectance)
+        };
+        let inv_eta2 = 1.0 / (self.eta * self.eta);
+        base * (self.transmittance(wi.z) * self.transmittance(wo.z) * FRAC_1_PI * inv_eta2 * wo.z)
+    }
+
+    fn lobe_probabilities(&self, wi: Vec3A) -> (f32, f32) {
+        let t = self.transmittance(wi.z);
+        let ps = (1.0 - t) * self.specular_weight;
+        let pd = t * (1.0 - self.specular_weight);
+        if ps + pd <= 0.0 {
+            return (0.0, 1.0);
+        }
+        (ps / (ps + pd), pd / (ps + pd))
+    }
+
+    pub(super) fn sample(&self, wi: Vec3A, u1: f32, u2: Vec2) -> Option<BsdfSample> {
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let (ps, pd) = self.lobe_probabilities(wi);
+        match self.roughness {
+            None if u1 < ps => {
+                let f = fresnel_dielectric(wi.z, self.eta).0;
+                Some(BsdfSample {
+                    wo: reflect(wi),
+                    weight: self.specular * (f / ps),
+                    pdf: ps,
+                    delta: true,
+                    eta: 1.0,
+                })
+            }
+            None => {
+                let wo = square_to_cosine_hemisphere(u2);
+                let pdf = pd * square_to_cosine_hemisphere_pdf(wo);
+                (pdf > 0.0).then(|| BsdfSample {
+                    wo,
+                    weight: self.diffuse_eval(wi, wo) / pdf,
+                    pdf,
+                    delta: false,
+                    eta: 1.0,
+                })
+            }
+            Some(ggx) => {
+                let wo = if u1 < ps {
+                    reflect_about(wi, ggx.sample_visible(wi, u2))
+                } else {
+                    square_to_cosine_hemisphere(u2)
+                };
+                if wo.z <= 0.0 {
+                    return None;
+                }
+                let pdf = self.pdf(wi, wo);
+                (pdf > 0.0).then(|| BsdfSample {
+                    wo,
+                    weight: self.eval(wi, wo) / pdf,
+                    pdf,
+                    delta: false,
+                    eta: 1.0,
+                })
+            }
+        }
+    }
+
+    pub(super) fn eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let mut value = self.diffuse_eval(wi, wo);
+        if let Some(ggx) = self.roughness {
+            let m = (wi + wo).normalize();
+            let f = fresnel_dielectric(wi.dot(m), self.eta).0;
+            value += self.specular * (f * ggx.d(m) * ggx.g(wi, wo, m) / (4.0 * wi.z));
+        }
+        value
+    }
+
+    pub(super) fn pdf(&self, wi: Vec3A, wo: Vec3A) -> f32 {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return 0.0;
+        }
+        let (ps, pd) = self.lobe_probabilities(wi);
+        let mut pdf = pd * square_to_cosine_hemisphere_pdf(wo);
+        if let Some(ggx) = self.roughness {
+            let m = (wi + wo).normalize();
+            let wo_m = wo.dot(m);
+            if wo_m > 0.0 {
+                pdf += ps * ggx.pdf_visible(wi, m) / (4.0 * wo_m);
+            }
+        }
+        pdf
+    }
+}
+
+/// Directional albedo of a rough dielectric interface's reflection, by midpoint quadrature.
+///
+/// Mitsuba tabulates the same quantity from a precomputed data file; computing it here keeps
+/// the model self-contained. The coating's transmittance is taken as one minus this albedo.
+fn rough_albedo(ggx: Ggx, eta: f32, mu: f32) -> f32 {
+    let wi = Vec3A::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+    let (nt, np) = (48, 96);
+    let mut sum = 0.0;
+    for i in 0..nt {
+        let cos_o = (i as f32 + 0.5) / nt as f32;
+        let sin_o = (1.0 - cos_o * cos_o).sqrt();
+        for j in 0..np {
+            let phi = (j as f32 + 0.5) / np as f32 * std::f32::consts::TAU;
+            let wo = Vec3A::new(sin_o * phi.cos(), sin_o * phi.sin(), cos_o);
+            let m = (wi + wo).normalize();
+            let f = fresnel_dielectric(wi.dot(m), eta).0;
+            // The integrand is f·cos θo over dω = dcos θo dφ; f·cos θo is F·D·G / (4 cos θi).
+            sum += f * ggx.d(m) * ggx.g(wi, wo, m) / (4.0 * mu);
+        }
+    }
+    (sum * std::f32::consts::TAU / (nt * np) as f32).clamp(0.0, 1.0)
+}

@@ -1,0 +1,184 @@
+//! The film: exact sums of pixel samples, and image output.
+//!
+//! Why fixed point: the farm adds partial images from many machines in whatever order they
+//! arrive. Integer addition is associative and commutative, so the sum, and so every byte of
+//! the image, does not depend on that order or on how passes were split.
+
+use std::path::Path;
+
+use crate::color::{Rgb, srgb_encode};
+
+/// Fixed-point scale: 2^24 steps per unit of radiance. A sample's rounding error (3e-8) is far
+/// below the f32 precision of the output, and i64 sums hold 5e11 units per pixel.
+pub const FIXED_SCALE: f64 = (1u64 << 24) as f64;
+
+/// Summed samples of a range of passes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FilmSum {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Per pixel, per channel: the sum of samples in units of 1 / [`FIXED_SCALE`].
+    pub sums: Vec<[i64; 3]>,
+    /// Passes summed (each pass is one sample per pixel).
+    pub passes: u64,
+    /// Samples that were NaN or infinite and were left out (counted so they can be reported).
+    pub nonfinite: u64,
+}
+
+/// Why two sums cannot be added or an image written.
+#[derive(Debug, thiserror::Error)]
+pub enum FilmError {
+    /// The two sums are of different image sizes.
+    #[error("cannot add a {0}x{1} film to a {2}x{3} film")]
+    SizeMismatch(u32, u32, u32, u32),
+    /// Nothing has been rendered yet.
+    #[error("no pass has been rendered yet")]
+    Empty,
+    /// The output file name has no supported extension.
+    #[error("unsupported output format \"{0}\": use .exr or .png")]
+    Format(String),
+    /// Writing the image failed.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: image::ImageError,
+    },
+}
+
+/// Converts one sample to fixed point; None for NaN or infinity.
+#[inline]
+pub fn to_fixed(v: Rgb) -> Option<[i64; 3]> {
+    if !v.is_finite() {
+        return None;
+    }
+    // Negative radiance cannot arise from valid transport; clamp so it cannot cancel energy.
+    Some([v.x, v.y, v.z].map(|c| (c.max(0.0) as f64 * FIXED_SCALE).round() as i64))
+}
+
+impl FilmSum {
+    /// An empty sum.
+    pub fn new(width: u32, height: u32) -> FilmSum {
+        FilmSum {
+            width,
+            height,
+            sums: vec![[0; 3]; width as usize * height as usize],
+            passes: 0,
+            nonfinite: 0,
+        }
+    }
+
+    /// Adds another sum: exact, so the order of additions never matters.
+    pub fn add(&mut self, other: &FilmSum) -> Result<(), FilmError> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return Err(FilmError::SizeMismatch(
+                other.width,
+                other.height,
+                self.width,
+                self.height,
+            ));
+        }
+        for (a, b) in self.sums.iter_mut().zip(&other.sums) {
+            for c in 0..3 {
+                a[c] = a[c].saturating_add(b[c]);
+            }
+        }
+        self.passes += other.passes;
+        self.nonfinite += other.nonfinite;
+        Ok(())
+    }
+
+    /// The mean of the passes: the image.
+    pub fn image(&self) -> Result<Vec<Rgb>, FilmError> {
+        if self.passes == 0 {
+            return Err(FilmError::Empty);
+        }
+        let scale = 1.0 / (FIXED_SCALE * self.passes as f64);
+        Ok(self
+            .sums
+            .iter()
+            .map(|s| {
+                Rgb::new(
+                    (s[0] as f64 * scale) as f32,
+                    (s[1] as f64 * scale) as f32,
+                    (s[2] as f64 * scale) as f32,
+                )
+            })
+            .collect())
+    }
+
+    /// Writes the image: linear 32-bit float EXR or sRGB 8-bit PNG, by the file's extension.
+    pub fn write(&self, path: &Path) -> Result<(), FilmError> {
+        write_image(&self.image()?, self.width, self.height, path)
+    }
+}
+
+/// Writes linear RGB pixels (row by row from the top) as EXR or PNG.
+pub fn write_image(pixels: &[Rgb], width: u32, height: u32, path: &Path) -> Result<(), FilmError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    let write_err = |source| FilmError::Write {
+        path: path.display().to_string(),
+        source,
+    };
+    match ext.as_str() {
+        "exr" => {
+            let data: Vec<f32> = pixels.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+            let img = image::Rgb32FImage::from_raw(width, height, data).ok_or(FilmError::Empty)?;
+            img.save_with_format(path, image::ImageFormat::OpenExr)
+                .map_err(write_err)
+        }
+        "png" => {
+            let to8 = |v: f32| (srgb_encode(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8;
+            let data: Vec<u8> = pixels
+                .iter()
+                .flat_map(|p| [to8(p.x), to8(p.y), to8(p.z)])
+                .collect();
+            let img = image::RgbImage::from_raw(width, height, data).ok_or(FilmError::Empty)?;
+            img.save_with_format(path, image::ImageFormat::Png)
+                .map_err(write_err)
+        }
+        other => Err(FilmError::Format(other.to_string())),
+    }
+}
+
+/// Reads an image (EXR or PNG) as linear RGB, for comparisons against references.
+pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<Rgb>), image::ImageError> {
+    let img = image::open(path)?.into_rgb32f();
+    let (w, h) = img.dimensions();
+    let px = img.pixels().map(|p| Rgb::new(p.0[0], p.0[1], p.0[2])).collect();
+    Ok((w, h, px))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn adding_is_exact_in_any_order() {
+        let mk = |v: f32| {
+            let mut f = FilmSum::new(1, 1);
+            f.sums[0] = to_fixed(Rgb::splat(v)).unwrap();
+            f.passes = 1;
+            f
+        };
+        let parts = [mk(0.1), mk(1e3), mk(3.3e-5), mk(7.77)];
+        let mut a = FilmSum::new(1, 1);
+        for p in &parts {
+            a.add(p).unwrap();
+        }
+        let mut b = FilmSum::new(1, 1);
+        for p in parts.iter().rev() {
+            b.add(p).unwrap();
+        }
+        assert_eq!(a, b);
+        assert!(FilmSum::new(2, 1).add(&a).is_err());
+        assert!(to_fixed(Rgb::new(f32::NAN, 0.0, 0.0)).is_none());
+    }
+}

@@ -1,0 +1,118 @@
+//! Rays, shapes and the bounding volume hierarchy that finds what a ray hits first.
+
+mod aabb;
+mod bvh;
+mod frame;
+mod ray;
+mod sphere;
+mod triangle;
+
+pub use aabb::Aabb;
+pub use bvh::Bvh;
+pub use frame::Frame;
+pub use ray::{Ray, offset_ray_origin};
+pub use sphere::Sphere;
+pub use triangle::Triangle;
+
+use glam::Vec3A;
+
+/// Something the BVH holds: a triangle or an analytic sphere, tagged with its shape.
+#[derive(Clone, Debug)]
+pub enum Primitive {
+    /// A triangle of a mesh (rectangles, cubes, disks, OBJ and PLY files all become these).
+    Triangle(Triangle),
+    /// An analytic sphere: exact silhouette and normals, which glass spheres need.
+    Sphere(Sphere),
+}
+
+/// The closest hit along a ray, before the surface is evaluated.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Distance along the ray (in units of its direction's length).
+    pub t: f32,
+    /// Index of the primitive in the BVH's order.
+    pub prim: u32,
+    /// Barycentric coordinates of the hit (triangles only).
+    pub b1: f32,
+    /// Second barycentric coordinate.
+    pub b2: f32,
+}
+
+/// Everything the integrators need about a surface point.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfacePoint {
+    /// Position.
+    pub p: Vec3A,
+    /// Conservative bound on the floating-point error of `p`, per axis: rays leaving the point
+    /// start just outside this box, which avoids self-intersection without a scene-scale epsilon.
+    pub p_err: Vec3A,
+    /// Geometric normal, oriented as the shape's normals are (after `flip_normals`).
+    pub ng: Vec3A,
+    /// Shading normal (interpolated vertex normals where a mesh has them), same hemisphere as `ng`.
+    pub ns: Vec3A,
+    /// Which shape was hit.
+    pub shape: u32,
+}
+
+impl Primitive {
+    /// Bounds of the primitive.
+    pub fn bounds(&self) -> Aabb {
+        match self {
+            Primitive::Triangle(t) => t.bounds(),
+            Primitive::Sphere(s) => s.bounds(),
+        }
+    }
+
+    /// Shape index the primitive belongs to.
+    pub fn shape(&self) -> u32 {
+        match self {
+            Primitive::Triangle(t) => t.shape,
+            Primitive::Sphere(s) => s.shape,
+        }
+    }
+
+    /// Surface area, used to sample area lights uniformly.
+    pub fn area(&self) -> f32 {
+        match self {
+            Primitive::Triangle(t) => t.area(),
+            Primitive::Sphere(s) => s.area(),
+        }
+    }
+
+    /// Ray intersection closer than `t_max`: (t, b1, b2).
+    #[inline]
+    pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<(f32, f32, f32)> {
+        match self {
+            Primitive::Triangle(t) => t.intersect(ray, t_max),
+            Primitive::Sphere(s) => s.intersect(ray, t_max).map(|t| (t, 0.0, 0.0)),
+        }
+    }
+
+    /// The surface at a hit.
+    pub fn surface(&self, ray: &Ray, hit: &Hit) -> SurfacePoint {
+        match self {
+            Primitive::Triangle(t) => t.surface(hit.b1, hit.b2),
+            Primitive::Sphere(s) => s.surface(ray.o + ray.d * hit.t),
+        }
+    }
+
+    /// A uniformly distributed point on the primitive: (point, its surface).
+    pub fn sample_point(&self, u: glam::Vec2) -> SurfacePoint {
+        match self {
+            Primitive::Triangle(t) => {
+                let b = crate::sampling::square_to_uniform_triangle(u);
+                t.surface(b.x, b.y)
+            }
+            Primitive::Sphere(s) => {
+                s.surface(s.center + s.radius * crate::sampling::square_to_uniform_sphere(u))
+            }
+        }
+    }
+}
+
+/// pbrt's γ(n): the relative error bound of n chained floating-point operations.
+#[inline]
+pub(crate) fn gamma(n: i32) -> f32 {
+    let e = f32::EPSILON * 0.5 * n as f32;
+    e / (1.0 - e)
+}

@@ -1,0 +1,16 @@
+//! Photonfarm's shared library: scene loading, geometry, materials, lights, cameras, the
+//! renderers and the film. The coordinator and the worker both link it, so that an iteration
+//! renders to the same bytes wherever it runs.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod bsdf;
+pub mod camera;
+pub mod color;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod light;
+pub mod render;
+pub mod sampling;
+pub mod scene;

@@ -1,0 +1,72 @@
+//! Light sources, and the choice of one in proportion to its power.
+//!
+//! The path tracer samples them for next-event estimation; SPPM will emit its photons through
+//! the same code, so both see the same lights.
+
+mod area;
+mod point;
+mod spot;
+
+pub use area::AreaLight;
+pub use point::PointLight;
+pub use spot::SpotLight;
+
+use glam::Vec3A;
+
+use crate::color::Rgb;
+
+/// A light as sampled from a point that it may illuminate.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// The point on the light.
+    pub p: Vec3A,
+    /// Its floating-point error bound (zero for point lights).
+    pub p_err: Vec3A,
+    /// The light's surface normal there (zero for point lights).
+    pub n: Vec3A,
+    /// Unit direction from the receiver towards the light.
+    pub wi: Vec3A,
+    /// Radiance (area lights) or intensity over distance squared (delta lights) arriving.
+    pub radiance: Rgb,
+    /// Density per unit solid angle at the receiver, excluding the light's selection
+    /// probability; 1 for delta lights.
+    pub pdf: f32,
+    /// Whether the light is a point in space (no MIS with BSDF sampling).
+    pub delta: bool,
+}
+
+/// A light source.
+#[derive(Clone, Debug)]
+pub enum Light {
+    /// Emission from a shape's surface.
+    Area(AreaLight),
+    /// Isotropic point.
+    Point(PointLight),
+    /// Point with Mitsuba's spot falloff.
+    Spot(SpotLight),
+}
+
+impl Light {
+    /// Samples a point on the light as seen from `p`.
+    pub fn sample_li(
+        &self,
+        p: Vec3A,
+        prims: &[crate::geometry::Primitive],
+        u: glam::Vec2,
+    ) -> Option<LightSample> {
+        match self {
+            Light::Area(l) => l.sample_li(p, prims, u),
+            Light::Point(l) => l.sample_li(p),
+            Light::Spot(l) => l.sample_li(p),
+        }
+    }
+
+    /// Emitted power (luminance), for choosing lights in proportion to it.
+    pub fn power(&self) -> f32 {
+        match self {
+            Light::Area(l) => l.power(),
+            Light::Point(l) => l.power(),
+            Light::Spot(l) => l.power(),
+        }
+    }
+}

@@ -1,0 +1,67 @@
+use std::f32::consts::PI;
+
+use glam::{Mat3A, Vec3A};
+
+use super::LightSample;
+use crate::color::{Rgb, luminance};
+
+/// A point light restricted to a cone (Mitsuba's `spot`): full intensity within `beam_width`,
+/// falling linearly in angle to zero at `cutoff_angle`.
+#[derive(Clone, Debug)]
+pub struct SpotLight {
+    /// Position.
+    pub position: Vec3A,
+    /// World to local rotation; the spot shines along local +z.
+    pub to_local: Mat3A,
+    /// Intensity at the centre of the beam, W/sr.
+    pub intensity: Rgb,
+    /// Cutoff angle, radians.
+    pub cutoff: f32,
+    /// Beam width, radians.
+    pub beam_width: f32,
+}
+
+impl SpotLight {
+    /// Fraction of the central intensity emitted along local direction `d`.
+    pub fn falloff(&self, d: Vec3A) -> f32 {
+        let cos = d.normalize_or_zero().z;
+        if cos <= self.cutoff.cos() {
+            0.0
+        } else if cos >= self.beam_width.cos() {
+            1.0
+        } else {
+            ((self.cutoff - cos.clamp(-1.0, 1.0).acos()) / (self.cutoff - self.beam_width)).clamp(0.0, 1.0)
+        }
+    }
+
+    pub(super) fn sample_li(&self, p: Vec3A) -> Option<LightSample> {
+        let d = self.position - p;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return None;
+        }
+        let wi = d / dist2.sqrt();
+        let falloff = self.falloff(self.to_local * -wi);
+        (falloff > 0.0).then(|| LightSample {
+            p: self.position,
+            p_err: Vec3A::ZERO,
+            n: Vec3A::ZERO,
+            wi,
+            radiance: self.intensity * (falloff / dist2),
+            pdf: 1.0,
+            delta: true,
+        })
+    }
+
+    pub(super) fn power(&self) -> f32 {
+        // 2π ∫ falloff(θ) sin θ dθ over the cone, by the midpoint rule.
+        let n = 256;
+        let mut sum = 0.0;
+        for i in 0..n {
+            let theta = (i as f32 + 0.5) / n as f32 * self.cutoff;
+            let d = Vec3A::new(theta.sin(), 0.0, theta.cos());
+            sum += self.falloff(d) * theta.sin() * self.cutoff / n as f32;
+        }
+        2.0 * PI * sum * luminance(self.intensity)
+    }
+}

@@ -1,0 +1,220 @@
+//! Random streams keyed by (seed, iteration, index), and the warps that turn uniform numbers
+//! into directions and points.
+//!
+//! Why keyed streams: an iteration must give the same numbers on any machine, with any thread
+//! count and any batch split. Every generator is therefore created from its key alone, never
+//! from entropy, thread ids or a shared generator.
+
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
+
+use glam::{Vec2, Vec3A};
+use rand_core::Rng;
+use rand_pcg::Pcg32;
+
+/// Which kind of path a stream drives. Keeps camera and photon streams of the same index apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    /// Camera paths: the index is the pixel.
+    Camera = 1,
+    /// Light paths (photons): the index is the photon.
+    Photon = 2,
+}
+
+/// One path's random numbers.
+pub struct Sampler {
+    rng: Pcg32,
+}
+
+/// SplitMix64's finaliser: a bijective mix, so distinct keys never share a state.
+fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+impl Sampler {
+    /// The stream for one (seed, kind, iteration, index): the only way to make a sampler.
+    pub fn new(seed: u64, stream: Stream, iteration: u64, index: u64) -> Self {
+        let a = mix64(seed ^ mix64(stream as u64));
+        let b = mix64(a ^ iteration);
+        let state = mix64(b ^ index.rotate_left(17));
+        let inc = mix64(state ^ 0x9e37_79b9_7f4a_7c15);
+        Sampler {
+            rng: Pcg32::new(state, inc),
+        }
+    }
+
+    /// A uniform number in [0, 1).
+    #[inline]
+    pub fn next_1d(&mut self) -> f32 {
+        // 24 bits: every value is exactly representable and strictly below 1.
+        (self.rng.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+
+    /// Two uniform numbers in [0, 1).
+    #[inline]
+    pub fn next_2d(&mut self) -> Vec2 {
+        let x = self.next_1d();
+        Vec2::new(x, self.next_1d())
+    }
+}
+
+/// Cosine-weighted direction on the +z hemisphere.
+pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3A {
+    let p = square_to_uniform_disk_concentric(u);
+    let z = (1.0 - p.length_squared()).max(0.0).sqrt();
+    Vec3A::new(p.x, p.y, z)
+}
+
+/// Density of [`square_to_cosine_hemisphere`] per unit solid angle.
+pub fn square_to_cosine_hemisphere_pdf(v: Vec3A) -> f32 {
+    FRAC_1_PI * v.z.max(0.0)
+}
+
+/// Shirley and Chiu's concentric map: low distortion, so stratified numbers stay stratified.
+pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
+    };
+    Vec2::new(r * theta.cos(), r * theta.sin())
+}
+
+/// Uniform direction on the unit sphere.
+pub fn square_to_uniform_sphere(u: Vec2) -> Vec3A {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3A::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Uniform direction in the cone around +z with the given cosine of its half-angle.
+pub fn square_to_uniform_cone(u: Vec2, cos_cutoff: f32) -> Vec3A {
+    let cos_theta = 1.0 - u.x * (1.0 - cos_cutoff);
+    let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3A::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta)
+}
+
+/// Density of [`square_to_uniform_cone`] per unit solid angle.
+pub fn square_to_uniform_cone_pdf(cos_cutoff: f32) -> f32 {
+    1.0 / (2.0 * PI * (1.0 - cos_cutoff))
+}
+
+/// Uniform barycentric coordinates (b1, b2) on a triangle.
+pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
+    let t = (1.0 - u.x).sqrt();
+    Vec2::new(1.0 - t, u.y * t)
+}
+
+/// A discrete distribution, sampled by inverting its cumulative sum.
+#[derive(Clone, Debug, Default)]
+pub struct Distribution1D {
+    cdf: Vec<f32>,
+    pmf: Vec<f32>,
+    total: f32,
+}
+
+impl Distribution1D {
+    /// From non-negative weights. All-zero weights give an empty distribution.
+    pub fn new(weights: &[f32]) -> Self {
+        let total: f64 = weights.iter().map(|&w| w.max(0.0) as f64).sum();
+        if total <= 0.0 {
+            return Distribution1D::default();
+        }
+        let mut acc = 0.0f64;
+        let mut cdf = Vec::with_capacity(weights.len());
+        let pmf = weights
+            .iter()
+            .map(|&w| {
+                acc += w.max(0.0) as f64;
+                cdf.push((acc / total) as f32);
+                (w.max(0.0) as f64 / total) as f32
+            })
+            .collect();
+        if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        Distribution1D {
+            cdf,
+            pmf,
+            total: total as f32,
+        }
+    }
+
+    /// Whether there is anything to sample.
+    pub fn is_empty(&self) -> bool {
+        self.cdf.is_empty()
+    }
+
+    /// Sum of the weights.
+    pub fn total(&self) -> f32 {
+        self.total
+    }
+
+    /// Probability of entry `i`.
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.pmf.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// Picks an entry; returns it, its probability, and `u` rescaled to [0, 1) for reuse.
+    pub fn sample(&self, u: f32) -> (usize, f32, f32) {
+        let i = self.cdf.partition_point(|&c| c <= u).min(self.cdf.len() - 1);
+        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        let p = self.pmf[i];
+        let rescaled = if p > 0.0 {
+            ((u - lo) / p).clamp(0.0, 1.0 - f32::EPSILON)
+        } else {
+            0.0
+        };
+        (i, p, rescaled)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn streams_depend_on_every_key_part_only() {
+        let draw = |s, st, i, j| Sampler::new(s, st, i, j).next_1d();
+        assert_eq!(draw(1, Stream::Camera, 2, 3), draw(1, Stream::Camera, 2, 3));
+        assert_ne!(draw(1, Stream::Camera, 2, 3), draw(1, Stream::Camera, 2, 4));
+        assert_ne!(draw(1, Stream::Camera, 2, 3), draw(1, Stream::Camera, 3, 3));
+        assert_ne!(draw(1, Stream::Camera, 2, 3), draw(2, Stream::Camera, 2, 3));
+        assert_ne!(draw(1, Stream::Camera, 2, 3), draw(1, Stream::Photon, 2, 3));
+    }
+
+    #[test]
+    fn uniform_numbers_have_the_right_mean_and_range() {
+        let mut s = Sampler::new(7, Stream::Camera, 0, 0);
+        let n = 100_000;
+        let mut sum = 0.0f64;
+        for _ in 0..n {
+            let x = s.next_1d();
+            assert!((0.0..1.0).contains(&x));
+            sum += x as f64;
+        }
+        assert!((sum / n as f64 - 0.5).abs() < 0.005);
+    }
+
+    #[test]
+    fn distribution_samples_in_proportion() {
+        let d = Distribution1D::new(&[1.0, 0.0, 3.0]);
+        let mut counts = [0usize; 3];
+        let n = 40_000;
+        for k in 0..n {
+            let (i, p, r) = d.sample((k as f32 + 0.5) / n as f32);
+            assert!((0.0..1.0).contains(&r));
+            assert!(p > 0.0);
+            counts[i] += 1;
+        }
+        assert_eq!(counts[1], 0);
+        assert!((counts[0] as f32 / n as f32 - 0.25).abs() < 0.001);
+    }
+}

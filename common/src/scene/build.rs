@@ -1,0 +1,674 @@
+//! Builds a [`Scene`] from the parsed XML: one function per element kind.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use glam::{Mat3A, Mat4, Vec3A};
+
+use super::mesh::{self, Mesh};
+use super::named;
+use super::props::{Ctx, Props, Res};
+use super::xml::{self, Element};
+use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
+use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Ggx, Plastic};
+use crate::camera::Camera;
+use crate::color::Rgb;
+use crate::geometry::{Bvh, Primitive, Sphere, Triangle};
+use crate::light::{AreaLight, Light, PointLight, SpotLight};
+use crate::sampling::Distribution1D;
+
+pub(super) fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+        file: path.to_path_buf(),
+        line: 0,
+        element: "scene file".into(),
+        message: format!("cannot read: {e}"),
+    })?;
+    from_str(&text, path, defines)
+}
+
+pub(super) fn from_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+    let root = xml::parse(path, text, defines)?;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let ctx = Ctx {
+        file: path.to_path_buf(),
+        dir: dir.to_path_buf(),
+    };
+    Builder::new(&ctx).scene(&root)
+}
+
+/// Accumulates the scene while the elements are read.
+struct Builder<'a> {
+    ctx: &'a Ctx,
+    bsdfs: Vec<Bsdf>,
+    bsdf_ids: HashMap<String, u32>,
+    shapes: Vec<ShapeInfo>,
+    prims: Vec<Primitive>,
+    /// Area emitters, by shape, until the BVH has fixed the primitives' order.
+    area_emitters: Vec<(u32, Rgb)>,
+    lights: Vec<Light>,
+    warnings: Vec<String>,
+}
+
+impl<'a> Builder<'a> {
+    fn new(ctx: &'a Ctx) -> Self {
+        Builder {
+            ctx,
+            bsdfs: Vec::new(),
+            bsdf_ids: HashMap::new(),
+            shapes: Vec::new(),
+            prims: Vec::new(),
+            area_emitters: Vec::new(),
+            lights: Vec::new(),
+            warnings: Vec::new(),
+        }
+    }
+
+    fn scene(mut self, root: &Element) -> Res<Scene> {
+        let ctx = self.ctx;
+        let mut sensor = None;
+        let mut integrator = None;
+        // Named materials first, so that shapes may refer to them wherever they are declared.
+        for el in root.children.iter().filter(|e| e.tag == "bsdf") {
+            let bsdf = self.bsdf(el)?;
+            let index = self.bsdfs.len() as u32;
+            self.bsdfs.push(bsdf);
+            if let Some(id) = el.attr("id")
+                && self.bsdf_ids.insert(id.to_string(), index).is_some()
+            {
+                return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
+            }
+        }
+        for el in &root.children {
+            match el.tag.as_str() {
+                "bsdf" => {}
+                "shape" => self.shape(el)?,
+                "emitter" => self.emitter(el)?,
+                "sensor" if sensor.is_some() => return Err(ctx.err(el, "only one <sensor> is supported")),
+                "sensor" => sensor = Some(el),
+                "integrator" if integrator.is_some() => {
+                    return Err(ctx.err(el, "only one <integrator> is allowed"));
+                }
+                "integrator" => integrator = Some(self.integrator(el)?),
+                other => {
+                    return Err(ctx.err(
+                        el,
+                        format!("<{other}> is not supported at the top level of a scene"),
+                    ));
+                }
+            }
+        }
+        let Some(sensor) = sensor else {
+            return Err(ctx.err(root, "the scene has no <sensor>"));
+        };
+        let (camera, spp) = self.sensor(sensor)?;
+        let integrator = integrator.unwrap_or(IntegratorDecl {
+            kind: "path".into(),
+            max_depth: -1,
+            rr_depth: 5,
+            params: Vec::new(),
+        });
+
+        let bvh = Bvh::build(std::mem::take(&mut self.prims));
+        self.attach_area_lights(&bvh);
+        if self.lights.is_empty() {
+            self.warnings
+                .push("the scene has no light source: the image will be black".into());
+        }
+        let powers: Vec<f32> = self.lights.iter().map(Light::power).collect();
+        let light_selection = Distribution1D::new(&powers);
+        if !self.lights.is_empty() && light_selection.is_empty() {
+            self.warnings
+                .push("every light has zero power: the image will be black".into());
+        }
+        Ok(Scene {
+            source: ctx.file.clone(),
+            bvh,
+            shapes: self.shapes,
+            bsdfs: self.bsdfs,
+            lights: self.lights,
+            light_selection,
+            camera,
+            spp,
+            integrator,
+            warnings: self.warnings,
+        })
+    }
+
+    /// Area lights learn their primitives once the BVH has put them in their final order.
+    fn attach_area_lights(&mut self, bvh: &Bvh) {
+        let mut by_shape: HashMap<u32, Vec<u32>> = HashMap::new();
+        for (i, p) in bvh.primitives().iter().enumerate() {
+            by_shape.entry(p.shape()).or_default().push(i as u32);
+        }
+        for (shape, radiance) in std::mem::take(&mut self.area_emitters) {
+            let prims = by_shape.remove(&shape).unwrap_or_default();
+            self.shapes[shape as usize].light = Some(self.lights.len() as u32);
+            self.lights
+                .push(Light::Area(AreaLight::new(radiance, prims, bvh.primitives())));
+        }
+    }
+
+    fn integrator(&mut self, el: &Element) -> Res<IntegratorDecl> {
+        let p = Props::new(self.ctx, el)?;
+        let kind = p.kind()?.to_string();
+        let max_depth = p.int("max_depth")?.unwrap_or(-1);
+        if max_depth < -1 || max_depth == 0 || max_depth > i32::MAX as i64 {
+            return Err(p.err_at(
+                "max_depth",
+                format!("max_depth must be -1 (unlimited) or positive, not {max_depth}"),
+            ));
+        }
+        let rr_depth = p.int("rr_depth")?.unwrap_or(5);
+        if !(1..=u32::MAX as i64).contains(&rr_depth) {
+            return Err(p.err_at("rr_depth", format!("rr_depth must be positive, not {rr_depth}")));
+        }
+        if p.boolean("hide_emitters")?.unwrap_or(false) {
+            return Err(p.err_at("hide_emitters", "hide_emitters=true is not supported".into()));
+        }
+        // The remaining numbers belong to the method (e.g. SPPM's photon count).
+        let mut params = Vec::new();
+        for c in &el.children {
+            if let (Some(name), "float" | "integer") = (c.attr("name"), c.tag.as_str())
+                && !matches!(name, "max_depth" | "rr_depth")
+                && let Some(v) = p.float(name)?
+            {
+                params.push((name.to_string(), v as f64));
+            }
+        }
+        p.finish()?;
+        Ok(IntegratorDecl {
+            kind,
+            max_depth: max_depth as i32,
+            rr_depth: rr_depth as u32,
+            params,
+        })
+    }
+
+    fn sensor(&mut self, el: &Element) -> Res<(Camera, u32)> {
+        let p = Props::new(self.ctx, el)?;
+        let kind = p.kind()?;
+        let (aperture_radius, focus_distance) = match kind {
+            "perspective" => (0.0, 1.0),
+            "thinlens" => (
+                p.float_or("aperture_radius", 0.0)?,
+                p.positive("focus_distance", 0.0)?,
+            ),
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("sensor type \"{other}\" is not supported (perspective, thinlens)"),
+                ));
+            }
+        };
+        if aperture_radius < 0.0 {
+            return Err(p.err_at("aperture_radius", "aperture_radius cannot be negative".into()));
+        }
+        let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        let near_clip = p.positive("near_clip", 0.01)?;
+        let far_clip = p.positive("far_clip", 10000.0)?;
+        if far_clip <= near_clip {
+            return Err(p.err_at("far_clip", "far_clip must exceed near_clip".into()));
+        }
+        let fov = match (p.float("fov")?, p.string("focal_length")?) {
+            (Some(_), Some(_)) => return Err(self.ctx.err(el, "give fov or focal_length, not both")),
+            (Some(f), None) => f,
+            (None, focal) => {
+                let focal = focal.unwrap_or("50mm");
+                let mm = focal.strip_suffix("mm").unwrap_or(focal);
+                let mm = p.parse_f32(el, mm)?;
+                if mm <= 0.0 {
+                    return Err(p.err_at("focal_length", "focal_length must be positive".into()));
+                }
+                // Mitsuba measures the focal length against a 36 mm wide film.
+                2.0 * (36.0 / (2.0 * mm)).atan().to_degrees()
+            }
+        };
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(p.err_at("fov", format!("fov must lie in (0, 180) degrees, not {fov}")));
+        }
+        let fov_axis = p.string("fov_axis")?.unwrap_or("x");
+
+        let film = p
+            .object("film")?
+            .ok_or_else(|| self.ctx.err(el, "the sensor has no <film>"))?;
+        let (width, height) = self.film(film)?;
+        let spp = match p.object("sampler")? {
+            Some(s) => self.sampler(s)?,
+            None => 4,
+        };
+        p.finish()?;
+
+        let aspect = width as f32 / height as f32;
+        let tan_half = (fov.to_radians() * 0.5).tan();
+        let along_x = match fov_axis {
+            "x" => true,
+            "y" => false,
+            "smaller" => aspect <= 1.0,
+            "larger" => aspect > 1.0,
+            other => {
+                return Err(p.err_at(
+                    "fov_axis",
+                    format!("fov_axis \"{other}\" is not supported (x, y, smaller, larger)"),
+                ));
+            }
+        };
+        let (tan_half_x, tan_half_y) = if along_x {
+            (tan_half, tan_half / aspect)
+        } else {
+            (tan_half * aspect, tan_half)
+        };
+        let camera = Camera {
+            to_world,
+            tan_half_x,
+            tan_half_y,
+            width,
+            height,
+            aperture_radius,
+            focus_distance,
+            near_clip,
+        };
+        Ok((camera, spp))
+    }
+
+    fn film(&mut self, el: &Element) -> Res<(u32, u32)> {
+        let p = Props::new(self.ctx, el)?;
+        if p.kind()? != "hdrfilm" {
+            return Err(self.ctx.err(el, "only hdrfilm is supported"));
+        }
+        let dim = |name: &str, default: i64| -> Res<u32> {
+            let v = p.int(name)?.unwrap_or(default);
+            if !(1..=65536).contains(&v) {
+                return Err(p.err_at(name, format!("film {name} must be between 1 and 65536, not {v}")));
+            }
+            Ok(v as u32)
+        };
+        let (w, h) = (dim("width", 768)?, dim("height", 576)?);
+        // Output-format parameters do not change the rendered radiance.
+        for name in ["file_format", "component_format", "banner"] {
+            let _ = p.string(name).ok();
+            let _ = p.boolean(name).ok();
+        }
+        if let Some(f) = p.string("pixel_format")?
+            && !matches!(f, "rgb" | "rgba")
+        {
+            return Err(p.err_at(
+                "pixel_format",
+                format!("pixel_format \"{f}\" is not supported (rgb, rgba)"),
+            ));
+        }
+        match p.object("rfilter")? {
+            Some(f) if f.attr("type") == Some("box") => {}
+            Some(f) => {
+                return Err(self.ctx.err(f, "only the box reconstruction filter is supported"));
+            }
+            None => self.warnings.push(format!(
+                "{}:{}: <film> has no <rfilter>; Mitsuba would use a Gaussian filter, we use box",
+                self.ctx.file.display(),
+                el.line
+            )),
+        }
+        p.finish()?;
+        Ok((w, h))
+    }
+
+    fn sampler(&mut self, el: &Element) -> Res<u32> {
+        let p = Props::new(self.ctx, el)?;
+        let kind = p.kind()?;
+        if !matches!(
+            kind,
+            "independent" | "stratified" | "multijitter" | "orthogonal" | "ldsampler"
+        ) {
+            return Err(self
+                .ctx
+                .err(el, format!("sampler type \"{kind}\" is not supported")));
+        }
+        let spp = p.int("sample_count")?.unwrap_or(4);
+        if !(1..=u32::MAX as i64).contains(&spp) {
+            return Err(p.err_at(
+                "sample_count",
+                format!("sample_count must be positive, not {spp}"),
+            ));
+        }
+        // Our samples are independent and keyed by (seed, pass, pixel); these do not apply.
+        let _ = p.int("seed")?;
+        let _ = p.boolean("jitter")?;
+        p.finish()?;
+        Ok(spp as u32)
+    }
+
+    /// A `<bsdf>` or `<ref>` to one.
+    fn bsdf_or_ref(&mut self, el: &Element) -> Res<Bsdf> {
+        if el.tag == "ref" {
+            let id = el
+                .attr("id")
+                .ok_or_else(|| self.ctx.err(el, "a <ref> needs an id"))?;
+            let i = *self
+                .bsdf_ids
+                .get(id)
+                .ok_or_else(|| self.ctx.err(el, format!("no <bsdf> with id \"{id}\"")))?;
+            return Ok(self.bsdfs[i as usize].clone());
+        }
+        self.bsdf(el)
+    }
+
+    fn nested_bsdfs(&mut self, p: &Props) -> Res<Vec<Bsdf>> {
+        let mut out = Vec::new();
+        for c in p.objects("bsdf").into_iter().chain(p.objects("ref")) {
+            out.push(self.bsdf_or_ref(c)?);
+        }
+        Ok(out)
+    }
+
+    fn bsdf(&mut self, el: &Element) -> Res<Bsdf> {
+        let p = Props::new(self.ctx, el)?;
+        let bsdf = match p.kind()? {
+            "diffuse" => Bsdf::Diffuse(Diffuse {
+                reflectance: p.reflectance("reflectance", Rgb::splat(0.5))?,
+            }),
+            kind @ ("conductor" | "roughconductor") => {
+                let (eta, k) = match (p.rgb("eta")?, p.rgb("k")?, p.string("material")?) {
+                    (Some(eta), Some(k), None) => (eta, k),
+                    (None, None, material) => {
+                        named::conductor(material.unwrap_or("none")).map_err(|m| p.err_at("material", m))?
+                    }
+                    _ => return Err(self.ctx.err(el, "give both eta and k, or a material, not a mix")),
+                };
+                if eta.min_element() < 0.0 || k.min_element() < 0.0 {
+                    return Err(self.ctx.err(el, "eta and k cannot be negative"));
+                }
+                Bsdf::Conductor(Conductor {
+                    eta,
+                    k,
+                    specular: p.reflectance("specular_reflectance", Rgb::ONE)?,
+                    roughness: if kind == "roughconductor" {
+                        Some(self.ggx(&p)?)
+                    } else {
+                        None
+                    },
+                })
+            }
+            "dielectric" => Bsdf::Dielectric(Dielectric {
+                eta: self.relative_ior(&p, "bk7")?,
+                specular_reflectance: p.reflectance("specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: p.reflectance("specular_transmittance", Rgb::ONE)?,
+            }),
+            kind @ ("plastic" | "roughplastic") => {
+                let roughness = if kind == "roughplastic" {
+                    Some(self.ggx(&p)?)
+                } else {
+                    None
+                };
+                Bsdf::Plastic(Box::new(Plastic::new(
+                    p.reflectance("diffuse_reflectance", Rgb::splat(0.5))?,
+                    p.reflectance("specular_reflectance", Rgb::ONE)?,
+                    self.relative_ior(&p, "polypropylene")?,
+                    p.boolean("nonlinear")?.unwrap_or(false),
+                    roughness,
+                )))
+            }
+            "twosided" => {
+                let mut nested = self.nested_bsdfs(&p)?;
+                match nested.len() {
+                    1 => {
+                        let b = nested.remove(0);
+                        Bsdf::TwoSided(Box::new((b.clone(), b)))
+                    }
+                    2 => {
+                        let back = nested.remove(1);
+                        Bsdf::TwoSided(Box::new((nested.remove(0), back)))
+                    }
+                    n => {
+                        return Err(self
+                            .ctx
+                            .err(el, format!("twosided needs one or two nested bsdfs, not {n}")));
+                    }
+                }
+            }
+            "blendbsdf" => {
+                let w = p.float_or("weight", 0.5)?;
+                if !(0.0..=1.0).contains(&w) {
+                    return Err(p.err_at("weight", format!("weight must lie in [0, 1], not {w}")));
+                }
+                let mut nested = self.nested_bsdfs(&p)?;
+                if nested.len() != 2 {
+                    return Err(self.ctx.err(
+                        el,
+                        format!("blendbsdf needs two nested bsdfs, not {}", nested.len()),
+                    ));
+                }
+                let second = nested.remove(1);
+                Bsdf::Blend(Box::new((nested.remove(0), second)), w)
+            }
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!(
+                        "bsdf type \"{other}\" is not supported (diffuse, conductor, roughconductor, \
+                         dielectric, plastic, roughplastic, twosided, blendbsdf)"
+                    ),
+                ));
+            }
+        };
+        p.finish()?;
+        Ok(bsdf)
+    }
+
+    /// GGX roughness. Mitsuba's default distribution is Beckmann, which we do not model: a
+    /// scene must ask for GGX so that it renders the same in both.
+    fn ggx(&self, p: &Props) -> Res<Ggx> {
+        match p.string("distribution")? {
+            Some("ggx") => {}
+            Some(d) => {
+                return Err(p.err_at(
+                    "distribution",
+                    format!("distribution \"{d}\" is not supported; use ggx"),
+                ));
+            }
+            None => {
+                return Err(self.ctx.err(
+                    p.el,
+                    "set <string name=\"distribution\" value=\"ggx\"/>: Mitsuba's default (beckmann) is not supported",
+                ));
+            }
+        }
+        if p.float("alpha_u")?.is_some() || p.float("alpha_v")?.is_some() {
+            return Err(self.ctx.err(
+                p.el,
+                "anisotropic roughness (alpha_u, alpha_v) is not supported; use alpha",
+            ));
+        }
+        let alpha = p.float_or("alpha", 0.1)?;
+        if !(alpha > 0.0 && alpha <= 1.0) {
+            return Err(p.err_at("alpha", format!("alpha must lie in (0, 1], not {alpha}")));
+        }
+        if p.boolean("sample_visible")? == Some(false) {
+            return Err(p.err_at("sample_visible", "sample_visible=false is not supported".into()));
+        }
+        Ok(Ggx {
+            alpha: alpha.max(1e-4),
+        })
+    }
+
+    /// int_ior / ext_ior, each a number or one of Mitsuba's names.
+    fn relative_ior(&self, p: &Props, default_int: &str) -> Res<f32> {
+        let read = |name: &str, default: &str| -> Res<f32> {
+            let v = match p.tag_of(name) {
+                Some("string") => {
+                    let s = p.string(name)?.unwrap_or(default);
+                    named::ior(s).map_err(|m| p.err_at(name, m))?
+                }
+                Some(_) => p.float(name)?.unwrap_or(1.0),
+                None => named::ior(default).expect("default names are in the table"),
+            };
+            if v < 1.0 {
+                return Err(p.err_at(name, format!("{name} must be at least 1, not {v}")));
+            }
+            Ok(v)
+        };
+        Ok(read("int_ior", default_int)? / read("ext_ior", "air")?)
+    }
+
+    fn shape(&mut self, el: &Element) -> Res<()> {
+        let p = Props::new(self.ctx, el)?;
+        let index = self.shapes.len() as u32;
+        let kind = p.kind()?;
+        let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        let flip = p.boolean("flip_normals")?.unwrap_or(false);
+        let mesh = match kind {
+            "sphere" => {
+                let center = p.point("center")?.unwrap_or(Vec3A::ZERO);
+                let radius = p.positive("radius", 1.0)?;
+                let m = to_world
+                    * Mat4::from_translation(center.into())
+                    * Mat4::from_scale(glam::Vec3::splat(radius));
+                let (scale, _, translation) = m.to_scale_rotation_translation();
+                if (scale.x - scale.y).abs() > 1e-4 * scale.x || (scale.x - scale.z).abs() > 1e-4 * scale.x {
+                    return Err(self.ctx.err(el, "a sphere's to_world must scale uniformly"));
+                }
+                self.prims.push(Primitive::Sphere(Sphere {
+                    center: translation.into(),
+                    radius: scale.x.abs(),
+                    shape: index,
+                    flip,
+                }));
+                None
+            }
+            "rectangle" => Some(mesh::rectangle()),
+            "cube" => Some(mesh::cube()),
+            "disk" => Some(mesh::disk()),
+            "obj" | "ply" => {
+                let name = p
+                    .string("filename")?
+                    .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
+                let path = p.file_in_scene_dir(name)?;
+                let mut m = if kind == "obj" {
+                    mesh::load_obj(&path)
+                } else {
+                    mesh::load_ply(&path)
+                }
+                .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
+                if p.boolean("face_normals")?.unwrap_or(false) {
+                    m.normals = None;
+                }
+                m.validate()
+                    .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
+                if m.triangles.is_empty() {
+                    return Err(p.err_at("filename", format!("{} has no faces", path.display())));
+                }
+                Some(m)
+            }
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!(
+                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply)"
+                    ),
+                ));
+            }
+        };
+        if let Some(mesh) = mesh {
+            self.push_mesh(mesh.transformed(&to_world), index, flip);
+        }
+
+        let nested = self.nested_bsdfs(&p)?;
+        let bsdf = match nested.len() {
+            0 => Bsdf::Diffuse(Diffuse {
+                reflectance: Rgb::splat(0.5),
+            }),
+            1 => nested.into_iter().next().expect("one element"),
+            _ => return Err(self.ctx.err(el, "a shape takes one bsdf")),
+        };
+        if let Some(em) = p.object("emitter")? {
+            let ep = Props::new(self.ctx, em)?;
+            if ep.kind()? != "area" {
+                return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
+            }
+            let radiance = ep.non_negative_rgb("radiance", Rgb::ONE)?;
+            ep.finish()?;
+            self.area_emitters.push((index, radiance));
+        }
+        p.finish()?;
+        self.bsdfs.push(bsdf);
+        self.shapes.push(ShapeInfo {
+            name: el
+                .attr("id")
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("{kind} at line {}", el.line)),
+            bsdf: self.bsdfs.len() as u32 - 1,
+            light: None,
+        });
+        Ok(())
+    }
+
+    fn push_mesh(&mut self, mesh: Mesh, shape: u32, flip: bool) {
+        for t in &mesh.triangles {
+            let p = t.map(|i| mesh.positions[i as usize]);
+            // Degenerate triangles can never be hit and would only divide by zero elsewhere.
+            if (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0 {
+                continue;
+            }
+            let n = mesh
+                .normals
+                .as_ref()
+                .map(|ns| Box::new(t.map(|i| ns[i as usize])));
+            self.prims
+                .push(Primitive::Triangle(Triangle { p, n, shape, flip }));
+        }
+    }
+
+    fn emitter(&mut self, el: &Element) -> Res<()> {
+        let p = Props::new(self.ctx, el)?;
+        let light = match p.kind()? {
+            "point" => {
+                let position = match (p.point("position")?, p.transform("to_world")?) {
+                    (Some(_), Some(_)) => {
+                        return Err(self.ctx.err(el, "give position or to_world, not both"));
+                    }
+                    (Some(pos), None) => pos,
+                    (None, m) => m.unwrap_or(Mat4::IDENTITY).transform_point3a(Vec3A::ZERO),
+                };
+                Light::Point(PointLight {
+                    position,
+                    intensity: p.non_negative_rgb("intensity", Rgb::ONE)?,
+                })
+            }
+            "spot" => {
+                let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+                let cutoff = p.positive("cutoff_angle", 20.0)?;
+                let beam = p.float_or("beam_width", cutoff * 0.75)?;
+                if !(cutoff <= 90.0 && beam > 0.0 && beam < cutoff) {
+                    return Err(self.ctx.err(
+                        el,
+                        format!("need 0 < beam_width < cutoff_angle <= 90 degrees (got {beam} and {cutoff})"),
+                    ));
+                }
+                let (_, rotation, translation) = m.to_scale_rotation_translation();
+                Light::Spot(SpotLight {
+                    position: translation.into(),
+                    to_local: Mat3A::from_quat(rotation).transpose(),
+                    intensity: p.non_negative_rgb("intensity", Rgb::ONE)?,
+                    cutoff: cutoff.to_radians(),
+                    beam_width: beam.to_radians(),
+                })
+            }
+            "area" => {
+                return Err(self
+                    .ctx
+                    .err(el, "an area emitter must be nested inside a <shape>"));
+            }
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("emitter type \"{other}\" is not supported (point, spot, area)"),
+                ));
+            }
+        };
+        p.finish()?;
+        self.lights.push(light);
+        Ok(())
+    }
+}

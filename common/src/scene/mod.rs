@@ -1,0 +1,147 @@
+//! The scene: what the Mitsuba 3 XML describes, ready to render.
+//!
+//! Loading happens in named steps: read the XML with its parameters ([`xml`]), check and read
+//! each element's parameters ([`props`]), and build shapes, materials, lights and the camera
+//! ([`build`]). Anything outside the supported subset is an error that names the file, line and
+//! element.
+
+mod build;
+mod error;
+mod mesh;
+mod named;
+mod props;
+mod transform;
+mod xml;
+
+pub use error::SceneError;
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3A;
+
+use crate::bsdf::Bsdf;
+use crate::camera::Camera;
+use crate::geometry::{Aabb, Bvh, Hit, Ray, SurfacePoint, offset_ray_origin};
+use crate::light::{Light, LightSample};
+use crate::sampling::Distribution1D;
+
+/// What a shape is made of.
+#[derive(Clone, Debug)]
+pub struct ShapeInfo {
+    /// The shape's id, or its type and position in the file.
+    pub name: String,
+    /// Index into [`Scene::bsdfs`].
+    pub bsdf: u32,
+    /// Index into [`Scene::lights`] if the shape emits.
+    pub light: Option<u32>,
+}
+
+/// The `<integrator>` element: the method is chosen on the command line, but its parameters
+/// are read here.
+#[derive(Clone, Debug)]
+pub struct IntegratorDecl {
+    /// The declared type (`path`, `sppm`, ...).
+    pub kind: String,
+    /// Longest path, in Mitsuba's meaning (1: emitters seen directly; -1: unlimited).
+    pub max_depth: i32,
+    /// Depth from which Russian roulette may end paths.
+    pub rr_depth: u32,
+    /// Any further numeric parameters, for the method that uses them.
+    pub params: Vec<(String, f64)>,
+}
+
+/// A loaded scene.
+#[derive(Debug)]
+pub struct Scene {
+    /// The file it came from.
+    pub source: PathBuf,
+    /// Geometry.
+    pub bvh: Bvh,
+    /// Per-shape materials and emitters.
+    pub shapes: Vec<ShapeInfo>,
+    /// Materials.
+    pub bsdfs: Vec<Bsdf>,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Chooses a light in proportion to its power.
+    pub light_selection: Distribution1D,
+    /// The sensor.
+    pub camera: Camera,
+    /// The sampler's `sample_count`: default samples per pixel.
+    pub spp: u32,
+    /// The integrator's parameters.
+    pub integrator: IntegratorDecl,
+    /// Things the user should know that do not stop the render.
+    pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// Loads a Mitsuba 3 XML scene; `defines` are `-D name=value` overrides.
+    pub fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+        build::load(path, defines)
+    }
+
+    /// Loads a scene from text, with `path` naming it in errors and anchoring mesh paths.
+    pub fn from_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+        build::from_str(text, path, defines)
+    }
+
+    /// Image width.
+    pub fn width(&self) -> u32 {
+        self.camera.width
+    }
+
+    /// Image height.
+    pub fn height(&self) -> u32 {
+        self.camera.height
+    }
+
+    /// Bounds of all geometry.
+    pub fn bounds(&self) -> Aabb {
+        self.bvh.bounds()
+    }
+
+    /// The first surface along the ray.
+    pub fn intersect(&self, ray: &Ray) -> Option<(Hit, SurfacePoint)> {
+        let hit = self.bvh.intersect(ray, f32::INFINITY)?;
+        let sp = self.bvh.primitives()[hit.prim as usize].surface(ray, &hit);
+        Some((hit, sp))
+    }
+
+    /// A ray leaving surface point `sp` in direction `w`.
+    pub fn spawn_ray(sp: &SurfacePoint, w: Vec3A) -> Ray {
+        Ray::new(offset_ray_origin(sp.p, sp.p_err, sp.ng, w), w)
+    }
+
+    /// Whether nothing blocks the segment from `sp` to the sampled light point.
+    pub fn unoccluded(&self, sp: &SurfacePoint, ls: &LightSample) -> bool {
+        let o = offset_ray_origin(sp.p, sp.p_err, sp.ng, ls.wi);
+        let target = if ls.n == Vec3A::ZERO {
+            ls.p
+        } else {
+            offset_ray_origin(ls.p, ls.p_err, ls.n, o - ls.p)
+        };
+        let d = target - o;
+        // Stop just short of the target so the light's own surface does not count.
+        !self.bvh.occluded(&Ray::new(o, d), 1.0 - 1e-4)
+    }
+
+    /// Picks a light by power and samples it from `p`; the pdf includes the choice.
+    pub fn sample_light(&self, p: Vec3A, u_select: f32, u: glam::Vec2) -> Option<(u32, LightSample)> {
+        if self.light_selection.is_empty() {
+            return None;
+        }
+        let (i, pmf, _) = self.light_selection.sample(u_select);
+        let mut ls = self.lights[i].sample_li(p, self.bvh.primitives(), u)?;
+        ls.pdf *= pmf;
+        Some((i as u32, ls))
+    }
+
+    /// Density of [`Scene::sample_light`] returning point `sp` on area light `light`, from `p`.
+    pub fn light_pdf(&self, light: u32, p: Vec3A, sp: &SurfacePoint) -> f32 {
+        match &self.lights[light as usize] {
+            Light::Area(a) => self.light_selection.pmf(light as usize) * a.pdf_li(p, sp.p, sp.ng),
+            _ => 0.0,
+        }
+    }
+}

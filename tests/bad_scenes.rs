@@ -1,0 +1,221 @@
+//! Bad scene files: each gives one clear line naming the file, line and element, never a panic.
+
+use std::path::{Path, PathBuf};
+
+use photonfarm::scene::Scene;
+
+/// A scene around `body`, with a sensor so that only the body can be wrong. The body starts on
+/// line 8.
+fn scene_text(body: &str, film: &str) -> String {
+    format!(
+        r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="45"/>
+        <film type="hdrfilm">{film}<rfilter type="box"/></film>
+    </sensor>
+    <bsdf type="diffuse" id="grey"/>
+    <emitter type="point"><point name="position" x="0" y="0" z="0"/></emitter>
+{body}
+</scene>"#
+    )
+}
+
+const FILM: &str = r#"<integer name="width" value="8"/><integer name="height" value="8"/>"#;
+
+/// Writes the scene into a fresh folder (with a sibling folder holding a mesh outside it).
+fn write_scene(text: &str) -> (tempfile::TempDir, PathBuf) {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("scene");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(
+        root.path().join("outside.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    std::fs::write(dir.join("inside.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let path = dir.join("bad.xml");
+    std::fs::write(&path, text).unwrap();
+    (root, path)
+}
+
+/// Loads and expects an error at `line` whose message contains `needle`.
+fn expect_error(text: &str, line: u32, needle: &str) {
+    let (_guard, path) = write_scene(text);
+    let err = Scene::load(&path, &[]).expect_err("the scene should be rejected");
+    let msg = err.to_string();
+    eprintln!("{msg}");
+    assert!(!msg.contains('\n'), "one line: {msg}");
+    assert!(
+        msg.starts_with(&format!("{}:{line}: ", path.display())),
+        "file and line {line}: {msg}"
+    );
+    assert!(msg.contains(needle), "expected \"{needle}\" in: {msg}");
+}
+
+#[test]
+fn malformed_xml() {
+    expect_error(&scene_text("<shape type=\"sphere\">", FILM), 9, "malformed XML");
+}
+
+#[test]
+fn unknown_element() {
+    expect_error(
+        &scene_text("<texture type=\"bitmap\"/>", FILM),
+        8,
+        "<texture> is not supported",
+    );
+    expect_error(
+        &scene_text("<shape type=\"teapot\"/>", FILM),
+        8,
+        "shape type \"teapot\" is not supported",
+    );
+    expect_error(
+        &scene_text(
+            "<shape type=\"sphere\"><float name=\"radios\" value=\"1\"/></shape>",
+            FILM,
+        ),
+        8,
+        "unknown parameter 'radios'",
+    );
+    expect_error(
+        &scene_text(
+            "<shape type=\"sphere\"><bsdf type=\"roughconductor\"/></shape>",
+            FILM,
+        ),
+        8,
+        "beckmann",
+    );
+}
+
+#[test]
+fn missing_mesh() {
+    expect_error(
+        &scene_text(
+            "<shape type=\"obj\"><string name=\"filename\" value=\"nope.obj\"/></shape>",
+            FILM,
+        ),
+        8,
+        "not found",
+    );
+    // The mesh that is present loads.
+    let (_guard, path) = write_scene(&scene_text(
+        "<shape type=\"obj\"><string name=\"filename\" value=\"inside.obj\"/></shape>",
+        FILM,
+    ));
+    Scene::load(&path, &[]).unwrap();
+}
+
+#[test]
+fn mesh_path_leaving_the_folder() {
+    for name in ["../outside.obj", "sub/../../outside.obj"] {
+        expect_error(
+            &scene_text(
+                &format!("<shape type=\"obj\"><string name=\"filename\" value=\"{name}\"/></shape>"),
+                FILM,
+            ),
+            8,
+            "stay inside",
+        );
+    }
+    let (guard, path) = write_scene("");
+    let absolute = guard.path().join("outside.obj");
+    std::fs::write(
+        &path,
+        scene_text(
+            &format!(
+                "<shape type=\"obj\"><string name=\"filename\" value=\"{}\"/></shape>",
+                absolute.display()
+            ),
+            FILM,
+        ),
+    )
+    .unwrap();
+    let msg = Scene::load(&path, &[]).unwrap_err().to_string();
+    assert!(msg.contains(":8: ") && msg.contains("stay inside"), "{msg}");
+}
+
+#[cfg(unix)]
+#[test]
+fn symlink_leaving_the_folder() {
+    let (guard, path) = write_scene(&scene_text(
+        "<shape type=\"obj\"><string name=\"filename\" value=\"link.obj\"/></shape>",
+        FILM,
+    ));
+    std::os::unix::fs::symlink(
+        guard.path().join("outside.obj"),
+        path.parent().unwrap().join("link.obj"),
+    )
+    .unwrap();
+    let msg = Scene::load(&path, &[]).unwrap_err().to_string();
+    assert!(msg.contains("outside the scene's folder"), "{msg}");
+}
+
+#[test]
+fn nonsense_values() {
+    expect_error(
+        &scene_text(
+            "<shape type=\"sphere\"><float name=\"radius\" value=\"nan\"/></shape>",
+            FILM,
+        ),
+        8,
+        "not a finite number",
+    );
+    expect_error(
+        &scene_text(
+            "<shape type=\"sphere\"><float name=\"radius\" value=\"-1\"/></shape>",
+            FILM,
+        ),
+        8,
+        "must be positive",
+    );
+    expect_error(
+        &scene_text(
+            "<bsdf type=\"diffuse\" id=\"x\"><rgb name=\"reflectance\" value=\"0.5, -0.1, 0.2\"/></bsdf>",
+            FILM,
+        ),
+        8,
+        "must lie in [0, 1]",
+    );
+    expect_error(
+        &scene_text(
+            "<shape type=\"sphere\"><emitter type=\"area\"><rgb name=\"radiance\" value=\"-3\"/></emitter></shape>",
+            FILM,
+        ),
+        8,
+        "cannot be negative",
+    );
+    expect_error(
+        &scene_text("<shape type=\"sphere\"><ref id=\"nothing\"/></shape>", FILM),
+        8,
+        "no <bsdf> with id",
+    );
+}
+
+#[test]
+fn zero_size_film() {
+    let film = r#"<integer name="width" value="0"/><integer name="height" value="8"/>"#;
+    expect_error(&scene_text("", film), 4, "width must be between 1 and 65536");
+}
+
+#[test]
+fn missing_scene_file() {
+    let msg = Scene::load(Path::new("/nonexistent/scene.xml"), &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.starts_with("/nonexistent/scene.xml:0: ") && msg.contains("cannot read"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn every_shipped_scene_loads() {
+    for dir in [photonfarm_tests::refs_dir(), photonfarm_tests::scenes_dir()] {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "xml") {
+                Scene::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
+            }
+        }
+    }
+}

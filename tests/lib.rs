@@ -1,0 +1,90 @@
+//! Helpers shared by the accuracy tests: rendering a scene file and comparing images the way
+//! `shared/scenes-ref/README.md` prescribes (MSE over pixels and channels, and channel means).
+
+use std::path::{Path, PathBuf};
+
+use photonfarm::color::Rgb;
+use photonfarm::film::{FilmSum, read_image};
+use photonfarm::integrator::path::PathSettings;
+use photonfarm::render::{RenderSettings, render_passes};
+use photonfarm::scene::Scene;
+
+/// The folder of checked-in references and test scenes.
+pub fn refs_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("refs")
+}
+
+/// The folder of small test scenes.
+pub fn scenes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+/// Errors of an image against a reference.
+#[derive(Clone, Copy, Debug)]
+pub struct Comparison {
+    /// Mean squared error over all pixels and the three channels.
+    pub mse: f64,
+    /// Channel means of the image.
+    pub mean: [f64; 3],
+    /// Channel means of the reference.
+    pub reference_mean: [f64; 3],
+}
+
+impl Comparison {
+    /// The largest relative difference of a channel mean.
+    pub fn worst_mean_error(&self) -> f64 {
+        (0..3)
+            .map(|c| (self.mean[c] - self.reference_mean[c]).abs() / self.reference_mean[c])
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Channel means.
+pub fn channel_means(img: &[Rgb]) -> [f64; 3] {
+    let mut m = [0.0f64; 3];
+    for p in img {
+        for (c, mc) in m.iter_mut().enumerate() {
+            *mc += p[c] as f64;
+        }
+    }
+    m.map(|v| v / img.len() as f64)
+}
+
+/// Compares two images of the same size.
+pub fn compare(img: &[Rgb], reference: &[Rgb]) -> Comparison {
+    assert_eq!(img.len(), reference.len(), "images differ in size");
+    let mut se = 0.0f64;
+    for (a, b) in img.iter().zip(reference) {
+        let d = *a - *b;
+        se += (d.x as f64).powi(2) + (d.y as f64).powi(2) + (d.z as f64).powi(2);
+    }
+    Comparison {
+        mse: se / (3 * img.len()) as f64,
+        mean: channel_means(img),
+        reference_mean: channel_means(reference),
+    }
+}
+
+/// Loads a scene, failing the test with the loader's message.
+pub fn load(path: &Path, defines: &[(&str, &str)]) -> Scene {
+    let defines: Vec<(String, String)> = defines
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    Scene::load(path, &defines).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Renders passes [0, spp) with the path tracer.
+pub fn render_path(scene: &Scene, spp: u64, seed: u64) -> FilmSum {
+    let settings = RenderSettings {
+        seed,
+        path: PathSettings::from_scene(scene),
+    };
+    render_passes(scene, &settings, 0..spp)
+}
+
+/// Reads a reference EXR.
+pub fn reference(name: &str) -> Vec<Rgb> {
+    let (_, _, px) = read_image(&refs_dir().join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    px
+}
