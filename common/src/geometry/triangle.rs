@@ -61,18 +61,15 @@ impl Triangle {
         if self.flip {
             ng = -ng;
         }
+        // As in Mitsuba, the interpolated normal alone decides which side is the front, even
+        // where it disagrees with the winding.
         let ns = match &self.n {
             Some(n) => {
                 let s = (b0 * n[0] + b1 * n[1] + b2 * n[2]).normalize_or_zero();
-                let s = if self.flip { -s } else { s };
-                // Keep the shading normal on the geometric side: a flipped interpolated normal
-                // would turn a surface's front into its back.
-                if s == Vec3A::ZERO {
-                    ng
-                } else if s.dot(ng) < 0.0 {
-                    -s
-                } else {
-                    s
+                match (s == Vec3A::ZERO, self.flip) {
+                    (true, _) => ng,
+                    (false, true) => -s,
+                    (false, false) => s,
                 }
             }
             None => ng,

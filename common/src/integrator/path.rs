@@ -124,7 +124,7 @@ fn emitted_with_mis(
     let Light::Area(area) = &scene.lights[light as usize] else {
         return Rgb::ZERO;
     };
-    let le = area.emitted(sp.ng, wo);
+    let le = area.emitted(sp.ns, wo);
     if le == Rgb::ZERO {
         return le;
     }

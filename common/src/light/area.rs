@@ -61,7 +61,7 @@ impl AreaLight {
             return None;
         }
         let wi = d / dist2.sqrt();
-        let radiance = self.emitted(sp.ng, -wi);
+        let radiance = self.emitted(sp.ns, -wi);
         if radiance == Rgb::ZERO {
             return None;
         }
