@@ -38,3 +38,21 @@ fn max_depth_counts_like_mitsuba() {
         "a point light is never seen directly"
     );
 }
+
+/// No light leaks through thin geometry: under a slab 1e-4 thick with a bright point light
+/// 2e-4 above its top face, the floor stays exactly black, while without the slab it is lit.
+#[test]
+fn thin_slab_does_not_leak_light() {
+    let scene = load(&scenes_dir().join("thin-slab.xml"), &[]);
+    let img = render_path(&scene, 16, 1).image().unwrap();
+    let worst = img.iter().map(|p| p.max_element()).fold(0.0f32, f32::max);
+    assert_eq!(worst, 0.0, "light leaked through the slab: {worst}");
+    // The same slab, 100 times thinner than the light's distance; still sealed.
+    let thinner = load(&scenes_dir().join("thin-slab.xml"), &[("thickness", "0.00001")]);
+    let img = render_path(&thinner, 16, 1).image().unwrap();
+    assert!(img.iter().all(|p| p.max_element() == 0.0), "light leaked through a 1e-5 slab");
+    // Control: the light just below the slab does light the floor.
+    let below = load(&scenes_dir().join("thin-slab.xml"), &[("light_y", "0.4997")]);
+    let img = render_path(&below, 4, 1).image().unwrap();
+    assert!(img.iter().all(|p| p.max_element() > 0.0), "the control scene should be lit everywhere");
+}
