@@ -50,9 +50,15 @@ fn thin_slab_does_not_leak_light() {
     // The same slab, 100 times thinner than the light's distance; still sealed.
     let thinner = load(&scenes_dir().join("thin-slab.xml"), &[("thickness", "0.00001")]);
     let img = render_path(&thinner, 16, 1).image().unwrap();
-    assert!(img.iter().all(|p| p.max_element() == 0.0), "light leaked through a 1e-5 slab");
+    assert!(
+        img.iter().all(|p| p.max_element() == 0.0),
+        "light leaked through a 1e-5 slab"
+    );
     // Control: the light just below the slab does light the floor.
     let below = load(&scenes_dir().join("thin-slab.xml"), &[("light_y", "0.4997")]);
     let img = render_path(&below, 4, 1).image().unwrap();
-    assert!(img.iter().all(|p| p.max_element() > 0.0), "the control scene should be lit everywhere");
+    assert!(
+        img.iter().all(|p| p.max_element() > 0.0),
+        "the control scene should be lit everywhere"
+    );
 }

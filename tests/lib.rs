@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use photonfarm::color::Rgb;
 use photonfarm::film::{FilmSum, read_image};
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{RenderSettings, render_passes};
+use photonfarm::integrator::sppm::SppmSettings;
+use photonfarm::render::{Method, RenderSettings, render_passes};
 use photonfarm::scene::Scene;
 
 /// The folder of checked-in references and test scenes.
@@ -78,9 +79,25 @@ pub fn load(path: &Path, defines: &[(&str, &str)]) -> Scene {
 pub fn render_path(scene: &Scene, spp: u64, seed: u64) -> FilmSum {
     let settings = RenderSettings {
         seed,
-        path: PathSettings::from_scene(scene),
+        method: Method::Path(PathSettings::from_scene(scene)),
     };
     render_passes(scene, &settings, 0..spp)
+}
+
+/// SPPM settings from the scene, with the given photon count.
+pub fn sppm_settings(scene: &Scene, photons: u64) -> SppmSettings {
+    let (mut s, _) = SppmSettings::from_scene(scene);
+    s.photons = photons;
+    s
+}
+
+/// Renders SPPM iterations [0, n).
+pub fn render_sppm(scene: &Scene, settings: SppmSettings, n: u64, seed: u64) -> FilmSum {
+    let settings = RenderSettings {
+        seed,
+        method: Method::Sppm(settings),
+    };
+    render_passes(scene, &settings, 0..n)
 }
 
 /// Reads a reference EXR.

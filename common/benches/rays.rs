@@ -12,7 +12,7 @@ use std::time::Instant;
 use glam::Vec2;
 use photonfarm::geometry::Frame;
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{RenderSettings, render_passes};
+use photonfarm::render::{Method, RenderSettings, render_passes};
 use photonfarm::sampling::{Sampler, Stream, square_to_cosine_hemisphere};
 use photonfarm::scene::Scene;
 
@@ -115,7 +115,7 @@ fn bench(name: &str, scene: &Scene) {
     let mut paths = Vec::new();
     let settings = RenderSettings {
         seed: 0,
-        path: PathSettings::from_scene(scene),
+        method: Method::Path(PathSettings::from_scene(scene)),
     };
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     for run in 0..RUNS as u64 {

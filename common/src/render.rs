@@ -8,59 +8,125 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
+use crate::color::Rgb;
 use crate::film::{FilmSum, to_fixed};
 use crate::integrator::path::{self, PathSettings};
+use crate::integrator::sppm::{self, GatherContext, PhotonMap, SppmSettings};
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
+
+/// The rendering method and its parameters.
+#[derive(Clone, Copy, Debug)]
+pub enum Method {
+    /// Path tracing: a pass is one path per pixel.
+    Path(PathSettings),
+    /// Progressive photon mapping: a pass is one iteration (a photon pass and one camera path
+    /// per pixel).
+    Sppm(SppmSettings),
+}
 
 /// How to render.
 #[derive(Clone, Copy, Debug)]
 pub struct RenderSettings {
     /// Seed of every random stream.
     pub seed: u64,
-    /// Path tracer settings.
-    pub path: PathSettings,
+    /// The method.
+    pub method: Method,
 }
 
-/// Renders passes `passes` in the current rayon pool.
+/// Renders passes `passes` in the current rayon pool. For SPPM the radii come from the
+/// settings' schedule; [`render_sppm_iterations`] takes them from the caller instead.
 pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64>) -> FilmSum {
-    let (w, h) = (scene.width(), scene.height());
-    let rows: Vec<(Vec<[i64; 3]>, u64)> = (0..h)
-        .into_par_iter()
-        .map(|y| render_row(scene, settings, y, passes.clone()))
-        .collect();
-    let mut film = FilmSum::new(w, h);
-    film.passes = passes.end.saturating_sub(passes.start);
-    for (y, (row, bad)) in rows.into_iter().enumerate() {
-        film.sums[y * w as usize..(y + 1) * w as usize].copy_from_slice(&row);
-        film.nonfinite += bad;
+    match &settings.method {
+        Method::Path(p) => {
+            let mut film = FilmSum::new(scene.width(), scene.height());
+            for pass in passes {
+                add_pixel_samples(scene, &mut film, |x, y, pixel| {
+                    let mut sampler = Sampler::new(settings.seed, Stream::Camera, pass, pixel);
+                    let ray = scene
+                        .camera
+                        .generate_ray(x, y, sampler.next_2d(), sampler.next_2d());
+                    path::radiance(scene, p, ray, &mut sampler)
+                });
+            }
+            film
+        }
+        Method::Sppm(s) => {
+            let radii = s.schedule().radii(passes.clone());
+            render_sppm_iterations(scene, settings.seed, s, passes, &radii)
+        }
+    }
+}
+
+/// Renders SPPM iterations `iterations` with the given radii (one per iteration).
+pub fn render_sppm_iterations(
+    scene: &Scene,
+    seed: u64,
+    settings: &SppmSettings,
+    iterations: Range<u64>,
+    radii: &[f32],
+) -> FilmSum {
+    assert_eq!(
+        radii.len() as u64,
+        iterations.end - iterations.start,
+        "one radius per iteration"
+    );
+    let mut film = FilmSum::new(scene.width(), scene.height());
+    let max_depth = settings.max_depth.unwrap_or(u32::MAX);
+    // Reused across iterations: memory depends on the photon count, not on the iterations.
+    let mut photons = Vec::new();
+    let mut map = PhotonMap::new();
+    for (iteration, &radius) in iterations.zip(radii) {
+        sppm::trace_photons(scene, seed, iteration, settings.photons, max_depth, &mut photons);
+        map.build(&photons, radius);
+        let ctx = GatherContext {
+            scene,
+            map: &map,
+            radius,
+            power_unit: sppm::power_unit(scene, settings.photons),
+            k: settings.k,
+            max_depth,
+            rr_depth: settings.rr_depth,
+        };
+        add_pixel_samples(scene, &mut film, |x, y, pixel| {
+            let mut sampler = Sampler::new(seed, Stream::Camera, iteration, pixel);
+            let ray = scene
+                .camera
+                .generate_ray(x, y, sampler.next_2d(), sampler.next_2d());
+            sppm::camera_path(&ctx, ray, &mut sampler)
+        });
     }
     film
 }
 
-fn render_row(scene: &Scene, settings: &RenderSettings, y: u32, passes: Range<u64>) -> (Vec<[i64; 3]>, u64) {
+/// Adds one sample per pixel, computed in parallel by rows, to the film; counts one pass.
+fn add_pixel_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32, u64) -> Rgb + Sync) {
     let w = scene.width();
-    let mut row = vec![[0i64; 3]; w as usize];
-    let mut nonfinite = 0;
-    for (x, acc) in row.iter_mut().enumerate() {
-        let pixel = y as u64 * w as u64 + x as u64;
-        for pass in passes.clone() {
-            let mut sampler = Sampler::new(settings.seed, Stream::Camera, pass, pixel);
-            let u_pixel = sampler.next_2d();
-            let u_lens = sampler.next_2d();
-            let ray = scene.camera.generate_ray(x as u32, y, u_pixel, u_lens);
-            let l = path::radiance(scene, &settings.path, ray, &mut sampler);
-            match to_fixed(l) {
-                Some(v) => {
-                    for c in 0..3 {
-                        acc[c] += v[c];
-                    }
-                }
-                None => nonfinite += 1,
+    let rows: Vec<(Vec<[i64; 3]>, u64)> = (0..scene.height())
+        .into_par_iter()
+        .map(|y| {
+            let mut nonfinite = 0;
+            let row = (0..w)
+                .map(|x| {
+                    let pixel = y as u64 * w as u64 + x as u64;
+                    to_fixed(sample(x, y, pixel)).unwrap_or_else(|| {
+                        nonfinite += 1;
+                        [0; 3]
+                    })
+                })
+                .collect();
+            (row, nonfinite)
+        })
+        .collect();
+    for (y, (row, nonfinite)) in rows.into_iter().enumerate() {
+        for (acc, v) in film.sums[y * w as usize..].iter_mut().zip(row) {
+            for c in 0..3 {
+                acc[c] += v[c];
             }
         }
+        film.nonfinite += nonfinite;
     }
-    (row, nonfinite)
+    film.passes += 1;
 }
 
 /// When to stop a progressive render.
@@ -70,6 +136,8 @@ pub struct Budget {
     pub passes: Option<u64>,
     /// Wall-clock limit: whole passes are rendered until it is reached.
     pub time_limit: Option<Duration>,
+    /// Chunks end on multiples of this, so that a checkpoint can be written there.
+    pub checkpoint_every: Option<u64>,
 }
 
 /// Where a progressive render stands.
@@ -96,7 +164,10 @@ pub fn render_progressive(
     let mut chunk = 1u64;
     loop {
         let remaining = budget.passes.map(|t| t - film.passes);
-        let chunk_now = remaining.map_or(chunk, |r| chunk.min(r));
+        let mut chunk_now = remaining.map_or(chunk, |r| chunk.min(r));
+        if let Some(every) = budget.checkpoint_every.filter(|&e| e > 0) {
+            chunk_now = chunk_now.min(every - film.passes % every);
+        }
         let part = render_passes(scene, settings, film.passes..film.passes + chunk_now);
         film.add(&part).expect("same scene, same size");
         let elapsed = start.elapsed();
@@ -146,7 +217,7 @@ mod tests {
         let scene = Scene::from_str(SCENE, Path::new("inline.xml"), &[]).unwrap();
         let settings = RenderSettings {
             seed: 9,
-            path: PathSettings::from_scene(&scene),
+            method: Method::Path(PathSettings::from_scene(&scene)),
         };
         let whole = render_passes(&scene, &settings, 0..6);
         let mut parts = render_passes(&scene, &settings, 4..6);

@@ -26,6 +26,9 @@ pub enum Command {
 pub enum Integrator {
     /// Unidirectional path tracing with next-event estimation and MIS.
     Path,
+    /// Stochastic progressive photon mapping (Knaus and Zwicker): caustics and light seen
+    /// through glass or in mirrors.
+    Sppm,
 }
 
 /// `coordinator render`.
@@ -39,12 +42,35 @@ pub struct RenderArgs {
     /// Rendering method.
     #[arg(long, value_enum, default_value = "path")]
     pub integrator: Integrator,
-    /// Samples per pixel (passes). Default: the scene's sampler sample_count, or no limit when
-    /// --time-limit is given.
+    /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count, or
+    /// no limit when --time-limit is given.
     #[arg(long)]
     pub spp: Option<u64>,
+    /// SPPM: iterations (each a photon pass and one sample per pixel). Default: the scene's
+    /// sampler sample_count, or no limit when --time-limit is given.
+    #[arg(long)]
+    pub iterations: Option<u64>,
+    /// SPPM: photons emitted per iteration [default: the scene's photon_count, else 200000].
+    #[arg(long)]
+    pub photons: Option<u64>,
+    /// SPPM: initial gather radius in scene units [default: the scene's initial_radius, else
+    /// three pixel footprints at the median distance the camera sees].
+    #[arg(long, allow_negative_numbers = true)]
+    pub radius: Option<f32>,
+    /// SPPM: Knaus and Zwicker's alpha in (0, 1), the fraction of photons kept per iteration
+    /// [default: the scene's alpha, else 2/3].
+    #[arg(long, allow_negative_numbers = true)]
+    pub alpha: Option<f64>,
+    /// SPPM: the cone filter's k >= 1 (weights fall linearly to 1 - 1/k at the radius)
+    /// [default: 1.1].
+    #[arg(long, allow_negative_numbers = true)]
+    pub k: Option<f32>,
+    /// Write the image so far every N passes or iterations, next to --out with the count in
+    /// the name (out-000256.exr).
+    #[arg(long, value_name = "N")]
+    pub checkpoint_every: Option<u64>,
     /// Stop after this many seconds, at the end of the pass under way.
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub time_limit: Option<f64>,
     /// Seed of every random number: the same seed gives the same image bytes.
     #[arg(long, default_value_t = 0)]

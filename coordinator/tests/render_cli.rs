@@ -126,3 +126,80 @@ fn bad_arguments_fail_before_rendering() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+#[test]
+fn sppm_bytes_do_not_depend_on_threads_and_checkpoints_match_shorter_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = refs().join("cbox-spheres.xml");
+    let render = |threads: &str, iterations: &str, out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            scene.to_str().unwrap(),
+            "--integrator",
+            "sppm",
+            "--out",
+            out.to_str().unwrap(),
+            "--iterations",
+            iterations,
+            "--photons",
+            "4000",
+            "--threads",
+            threads,
+            "-D",
+            "res=40",
+        ];
+        args.extend_from_slice(extra);
+        let o = run(&args);
+        assert!(o.status.success());
+    };
+    let one = dir.path().join("one.exr");
+    let two = dir.path().join("two.exr");
+    render("1", "6", &one, &["--checkpoint-every", "2"]);
+    render("2", "6", &two, &[]);
+    assert!(
+        std::fs::read(&one).unwrap() == std::fs::read(&two).unwrap(),
+        "SPPM bytes depend on threads"
+    );
+    // Checkpoints at 2 and 4 equal renders of 2 and 4 iterations.
+    for n in [2, 4] {
+        let cp = dir.path().join(format!("one-{n:06}.exr"));
+        let short = dir.path().join(format!("short{n}.exr"));
+        render("2", &n.to_string(), &short, &[]);
+        assert!(
+            std::fs::read(&cp).unwrap() == std::fs::read(&short).unwrap(),
+            "checkpoint {n}"
+        );
+    }
+    // The last checkpoint coincides with the final image.
+    assert!(std::fs::read(dir.path().join("one-000006.exr")).unwrap() == std::fs::read(&one).unwrap());
+}
+
+#[test]
+fn bad_sppm_parameters_fail_clearly() {
+    let scene = refs().join("cbox.xml");
+    let s = scene.to_str().unwrap();
+    for (flags, needle) in [
+        (vec!["--alpha", "1.5"], "alpha must lie strictly between 0 and 1"),
+        (vec!["--alpha", "0"], "alpha must lie strictly between 0 and 1"),
+        (
+            vec!["--photons", "0"],
+            "photon count per iteration must be at least 1",
+        ),
+        (
+            vec!["--radius", "-0.1"],
+            "initial radius must be a positive number",
+        ),
+        (vec!["--k", "0.5"], "k must be at least 1"),
+        (vec!["--spp", "4"], "use --iterations"),
+    ] {
+        let mut args = vec!["render", s, "--integrator", "sppm", "--out", "/tmp/never.exr"];
+        args.extend(flags);
+        let o = run(&args);
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(needle), "expected \"{needle}\" in {err}");
+    }
+    let o = run(&["render", s, "--out", "/tmp/never.exr", "--photons", "5"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--photons applies to --integrator sppm"));
+}

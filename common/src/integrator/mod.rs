@@ -2,6 +2,7 @@
 //! in [`crate::render`] decides which pixels and passes.
 
 pub mod path;
+pub mod sppm;
 
 /// Multiple importance sampling's power heuristic (β = 2).
 #[inline]

@@ -2,10 +2,11 @@ use std::f32::consts::PI;
 
 use glam::{Vec2, Vec3A};
 
-use super::LightSample;
+use super::{EmittedPhoton, LightSample};
 use crate::color::{Rgb, luminance};
+use crate::geometry::Frame;
 use crate::geometry::Primitive;
-use crate::sampling::Distribution1D;
+use crate::sampling::{Distribution1D, square_to_cosine_hemisphere};
 
 /// A shape that emits constant radiance from its front side (Mitsuba's `area` emitter).
 #[derive(Clone, Debug)]
@@ -74,6 +75,29 @@ impl AreaLight {
             radiance,
             pdf,
             delta: false,
+        })
+    }
+
+    /// A uniform point on the surface and a cosine-distributed direction on its front side:
+    /// the power is then radiance · π · area.
+    pub(super) fn sample_emission(
+        &self,
+        prims: &[Primitive],
+        u_pos: Vec2,
+        u_dir: Vec2,
+    ) -> Option<EmittedPhoton> {
+        if self.area_distribution.is_empty() {
+            return None;
+        }
+        let (i, _, ux) = self.area_distribution.sample(u_pos.x);
+        let sp = prims[self.prims[i] as usize].sample_point(Vec2::new(ux, u_pos.y));
+        let dir = Frame::from_normal(sp.ns).to_world(square_to_cosine_hemisphere(u_dir));
+        Some(EmittedPhoton {
+            origin: sp.p,
+            origin_err: sp.p_err,
+            n: sp.ng,
+            dir,
+            power: self.radiance * (PI * self.area),
         })
     }
 

@@ -35,6 +35,22 @@ pub struct LightSample {
     pub delta: bool,
 }
 
+/// A photon leaving a light.
+#[derive(Clone, Copy, Debug)]
+pub struct EmittedPhoton {
+    /// Where it starts.
+    pub origin: Vec3A,
+    /// Floating-point error bound of the origin (zero for point lights).
+    pub origin_err: Vec3A,
+    /// Surface normal at the origin (zero for point lights).
+    pub n: Vec3A,
+    /// Unit direction of flight.
+    pub dir: Vec3A,
+    /// Power carried: emitted radiance or intensity over the sampling densities, excluding the
+    /// light's selection probability.
+    pub power: Rgb,
+}
+
 /// A light source.
 #[derive(Clone, Debug)]
 pub enum Light {
@@ -58,6 +74,20 @@ impl Light {
             Light::Area(l) => l.sample_li(p, prims, u),
             Light::Point(l) => l.sample_li(p),
             Light::Spot(l) => l.sample_li(p),
+        }
+    }
+
+    /// Samples a photon: a position on the light and a direction of flight.
+    pub fn sample_emission(
+        &self,
+        prims: &[crate::geometry::Primitive],
+        u_pos: glam::Vec2,
+        u_dir: glam::Vec2,
+    ) -> Option<EmittedPhoton> {
+        match self {
+            Light::Area(l) => l.sample_emission(prims, u_pos, u_dir),
+            Light::Point(l) => l.sample_emission(u_dir),
+            Light::Spot(l) => l.sample_emission(u_dir),
         }
     }
 

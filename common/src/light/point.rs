@@ -2,7 +2,7 @@ use std::f32::consts::PI;
 
 use glam::Vec3A;
 
-use super::LightSample;
+use super::{EmittedPhoton, LightSample};
 use crate::color::{Rgb, luminance};
 
 /// An isotropic point light (Mitsuba's `point`).
@@ -29,6 +29,16 @@ impl PointLight {
             radiance: self.intensity / dist2,
             pdf: 1.0,
             delta: true,
+        })
+    }
+
+    pub(super) fn sample_emission(&self, u: glam::Vec2) -> Option<EmittedPhoton> {
+        Some(EmittedPhoton {
+            origin: self.position,
+            origin_err: Vec3A::ZERO,
+            n: Vec3A::ZERO,
+            dir: crate::sampling::square_to_uniform_sphere(u),
+            power: self.intensity * (4.0 * PI),
         })
     }
 

@@ -2,8 +2,9 @@ use std::f32::consts::PI;
 
 use glam::{Mat3A, Vec3A};
 
-use super::LightSample;
+use super::{EmittedPhoton, LightSample};
 use crate::color::{Rgb, luminance};
+use crate::sampling::{square_to_uniform_cone, square_to_uniform_cone_pdf};
 
 /// A point light restricted to a cone (Mitsuba's `spot`): full intensity within `beam_width`,
 /// falling linearly in angle to zero at `cutoff_angle`.
@@ -50,6 +51,20 @@ impl SpotLight {
             radiance: self.intensity * (falloff / dist2),
             pdf: 1.0,
             delta: true,
+        })
+    }
+
+    /// A direction uniform in the cutoff cone, weighted by the falloff.
+    pub(super) fn sample_emission(&self, u: glam::Vec2) -> Option<EmittedPhoton> {
+        let cos_cutoff = self.cutoff.cos();
+        let local = square_to_uniform_cone(u, cos_cutoff);
+        let falloff = self.falloff(local);
+        (falloff > 0.0).then(|| EmittedPhoton {
+            origin: self.position,
+            origin_err: Vec3A::ZERO,
+            n: Vec3A::ZERO,
+            dir: (self.to_local.transpose() * local).normalize(),
+            power: self.intensity * (falloff / square_to_uniform_cone_pdf(cos_cutoff)),
         })
     }
 

@@ -1,0 +1,154 @@
+//! Stochastic progressive photon mapping in Knaus and Zwicker's probabilistic form: every
+//! iteration is an independent, consistent-in-the-limit estimate of the image with one global
+//! radius, and the image is the mean of the iterations.
+//!
+//! An iteration depends only on (scene, settings, seed, its index, its radius): that is what
+//! lets any machine render any batch. Steps of iteration i: [`trace::trace_photons`] (photon
+//! pass), [`PhotonMap::build`], then [`gather::camera_path`] for every pixel (camera pass).
+
+mod gather;
+mod photon;
+mod photon_map;
+mod radius;
+mod trace;
+
+pub use gather::{GatherContext, camera_path};
+pub use photon::Photon;
+pub use photon_map::PhotonMap;
+pub use radius::RadiusSchedule;
+pub use trace::{power_unit, trace_photons};
+
+use crate::scene::Scene;
+
+/// SPPM's parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SppmSettings {
+    /// Photons emitted per iteration.
+    pub photons: u64,
+    /// Radius of the first iteration, in scene units.
+    pub initial_radius: f32,
+    /// Knaus and Zwicker's α in (0, 1).
+    pub alpha: f64,
+    /// Cone filter parameter k ≥ 1.
+    pub k: f32,
+    /// Longest photon path and longest camera path (None: Russian roulette decides).
+    pub max_depth: Option<u32>,
+    /// Depth from which the camera path's Russian roulette applies.
+    pub rr_depth: u32,
+}
+
+/// Why SPPM parameters were refused.
+#[derive(Debug, thiserror::Error)]
+pub enum SppmError {
+    /// α outside (0, 1).
+    #[error("alpha must lie strictly between 0 and 1, not {0}")]
+    Alpha(f64),
+    /// No photons.
+    #[error("the photon count per iteration must be at least 1")]
+    Photons,
+    /// A radius that is not a positive number.
+    #[error("the initial radius must be a positive number of scene units, not {0}")]
+    Radius(f32),
+    /// k below 1.
+    #[error("the cone filter's k must be at least 1, not {0}")]
+    K(f32),
+}
+
+impl SppmSettings {
+    /// Checks the parameters.
+    pub fn validate(&self) -> Result<(), SppmError> {
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(SppmError::Alpha(self.alpha));
+        }
+        if self.photons == 0 {
+            return Err(SppmError::Photons);
+        }
+        if !(self.initial_radius > 0.0 && self.initial_radius.is_finite()) {
+            return Err(SppmError::Radius(self.initial_radius));
+        }
+        if !(self.k >= 1.0 && self.k.is_finite()) {
+            return Err(SppmError::K(self.k));
+        }
+        Ok(())
+    }
+
+    /// Settings from the scene's `<integrator>`: Mitsuba's `photon_count`, `initial_radius` (0 or
+    /// absent: [`default_radius`]) and `alpha`, our `k`, and `max_depth` and `rr_depth`.
+    /// Unknown parameters of an `sppm` integrator are reported as warnings.
+    pub fn from_scene(scene: &Scene) -> (SppmSettings, Vec<String>) {
+        let decl = &scene.integrator;
+        let mut s = SppmSettings {
+            photons: 200_000,
+            initial_radius: 0.0,
+            alpha: 2.0 / 3.0,
+            k: 1.1,
+            max_depth: u32::try_from(decl.max_depth).ok(),
+            rr_depth: decl.rr_depth,
+        };
+        let mut warnings = Vec::new();
+        if decl.kind == "sppm" {
+            for (name, v) in &decl.params {
+                match name.as_str() {
+                    "photon_count" => s.photons = *v as u64,
+                    "initial_radius" => s.initial_radius = *v as f32,
+                    "alpha" => s.alpha = *v,
+                    "k" => s.k = *v as f32,
+                    "samples_per_pass" | "iterations" => {}
+                    other => warnings.push(format!(
+                        "<integrator type=\"sppm\">: parameter '{other}' is not used"
+                    )),
+                }
+            }
+        }
+        if s.initial_radius <= 0.0 {
+            s.initial_radius = default_radius(scene);
+        }
+        (s, warnings)
+    }
+
+    /// The surface radius schedule.
+    pub fn schedule(&self) -> RadiusSchedule {
+        RadiusSchedule {
+            initial: self.initial_radius as f64,
+            alpha: self.alpha,
+            dimension: 2,
+        }
+    }
+}
+
+/// The default initial radius: three pixel footprints at the median distance of what the camera
+/// sees, so that it follows the scene's scale and the image's resolution but not geometry out
+/// of view. Falls back to the scene's size over the resolution if the camera sees nothing.
+pub fn default_radius(scene: &Scene) -> f32 {
+    let cam = &scene.camera;
+    let n = 16u32;
+    let mut dists = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let x = (i * cam.width) / n + cam.width / (2 * n);
+            let y = (j * cam.height) / n + cam.height / (2 * n);
+            let ray = cam.generate_ray(
+                x.min(cam.width - 1),
+                y.min(cam.height - 1),
+                glam::Vec2::splat(0.5),
+                glam::Vec2::splat(0.5),
+            );
+            if let Some((hit, _)) = scene.intersect(&ray) {
+                dists.push(hit.t);
+            }
+        }
+    }
+    let extent = cam.width.max(cam.height) as f32;
+    if dists.is_empty() {
+        let diag = scene.bounds().extent().length();
+        return if diag > 0.0 && diag.is_finite() {
+            3.0 * diag / extent
+        } else {
+            1.0
+        };
+    }
+    dists.sort_by(f32::total_cmp);
+    let median = dists[dists.len() / 2];
+    let tan_half = cam.tan_half_x.max(cam.tan_half_y);
+    3.0 * 2.0 * median * tan_half / extent
+}
