@@ -139,6 +139,19 @@ impl Bsdf {
         }
     }
 
+    /// Whether the material has a diffuse part, where photon density estimation works well.
+    /// Purely glossy materials (rough metals) are better sampled by following the BSDF: their
+    /// sharp lobes would turn a photon estimate into speckles.
+    pub fn gathers_photons(&self) -> bool {
+        match self {
+            Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => false,
+            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
+                pair.0.gathers_photons() || pair.1.gathers_photons()
+            }
+        }
+    }
+
     /// Whether any lobe is not a delta: only then do light sampling and photon gathering see it.
     pub fn has_smooth(&self) -> bool {
         match self {

@@ -1,6 +1,10 @@
-//! The camera pass: one jittered path per pixel through specular bounces to the first surface
-//! with a non-specular part, where direct light is sampled and the photons within the
+//! The camera pass: one jittered path per pixel through specular and glossy bounces to the first
+//! surface with a diffuse part, where direct light is sampled and the photons within the
 //! iteration's radius estimate the rest.
+//!
+//! Specular bounces are followed as photons are. Glossy-only surfaces (rough metals) are
+//! followed by BSDF sampling, with light sampling and multiple importance sampling as in the
+//! path tracer, because a density estimate through a sharp lobe is speckled.
 
 use std::f32::consts::PI;
 
@@ -10,6 +14,7 @@ use super::photon_map::PhotonMap;
 use crate::bsdf::{Bsdf, TransportMode};
 use crate::color::Rgb;
 use crate::geometry::{Frame, Ray, SurfacePoint};
+use crate::integrator::mis_weight;
 use crate::light::Light;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -32,24 +37,37 @@ pub struct GatherContext<'a> {
     pub rr_depth: u32,
 }
 
+/// The previous bounce of a camera path, for weighting emission found by BSDF sampling.
+struct PreviousBounce {
+    p: Vec3A,
+    pdf: f32,
+    delta: bool,
+}
+
 /// Radiance along the camera ray of one pixel sample.
 pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> Rgb {
     let scene = ctx.scene;
     let mut l = Rgb::ZERO;
     let mut beta = Rgb::ONE;
     let mut eta = 1.0f32;
+    let mut prev: Option<PreviousBounce> = None;
     for depth in 0..ctx.max_depth {
         let Some((_, sp)) = scene.intersect(&ray) else {
             break;
         };
         let wo = -ray.d;
         let shape = &scene.shapes[sp.shape as usize];
-        // Emitters seen directly or through specular bounces (light sampling cannot find
-        // these paths, so they carry full weight).
+        // Emitters seen directly, through specular bounces (full weight: light sampling cannot
+        // find these paths) or through glossy ones (weighted against light sampling).
         if let Some(li) = shape.light
             && let Light::Area(area) = &scene.lights[li as usize]
         {
-            l += beta * area.emitted(sp.ns, wo);
+            let le = area.emitted(sp.ns, wo);
+            let w = match &prev {
+                Some(p) if !p.delta => mis_weight(p.pdf, scene.light_pdf(li, p.p, &sp)),
+                _ => 1.0,
+            };
+            l += beta * le * w;
         }
         if depth + 1 >= ctx.max_depth {
             break;
@@ -59,21 +77,29 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
         let wi_local = frame.to_local(wo);
         let u_light = sampler.next_1d();
         let u_light2 = sampler.next_2d();
-        if bsdf.has_smooth() {
-            l += beta * direct_light(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2);
+        let gather = bsdf.gathers_photons();
+        if gather {
+            l += beta * direct_light(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, false);
             l += beta * photon_estimate(ctx, bsdf, &sp, &frame, wo, wi_local);
+        } else if bsdf.has_smooth() {
+            l += beta * direct_light(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, true);
         }
-        // Continue through the specular lobes only: the photons already account for the rest.
+        // Continue through specular lobes, and through glossy ones where nothing was gathered.
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
         let Some(bs) = bsdf.sample(wi_local, u1, u2, TransportMode::Radiance) else {
             break;
         };
-        if !bs.delta {
+        if gather && !bs.delta {
             break;
         }
         beta *= bs.weight;
         eta *= bs.eta;
+        prev = Some(PreviousBounce {
+            p: sp.p,
+            pdf: bs.pdf,
+            delta: bs.delta,
+        });
         ray = Scene::spawn_ray(&sp, frame.to_world(bs.wo));
         if depth + 1 > ctx.rr_depth {
             let q = (beta.max_element() * eta * eta).min(0.95);
@@ -86,7 +112,9 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
     l
 }
 
-/// Light arriving straight from a light source, by light sampling.
+/// Light arriving straight from a light source, by light sampling; weighted against BSDF
+/// sampling where the path goes on to sample the BSDF.
+#[allow(clippy::too_many_arguments)]
 fn direct_light(
     scene: &Scene,
     bsdf: &Bsdf,
@@ -95,15 +123,22 @@ fn direct_light(
     wi_local: Vec3A,
     u_select: f32,
     u: Vec2,
+    with_mis: bool,
 ) -> Rgb {
     let Some((_, ls)) = scene.sample_light(sp.p, u_select, u) else {
         return Rgb::ZERO;
     };
-    let f = bsdf.eval(wi_local, frame.to_local(ls.wi));
+    let wl = frame.to_local(ls.wi);
+    let f = bsdf.eval(wi_local, wl);
     if f == Rgb::ZERO || !scene.unoccluded(sp, &ls) {
         return Rgb::ZERO;
     }
-    f * ls.radiance / ls.pdf
+    let w = if with_mis && !ls.delta {
+        mis_weight(ls.pdf, bsdf.pdf(wi_local, wl))
+    } else {
+        1.0
+    };
+    f * ls.radiance * (w / ls.pdf)
 }
 
 /// The density estimate: Σ f · Φ · w / (normalisation · π r²), with the cone filter w.

@@ -71,8 +71,9 @@ fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u3
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
         let wi = -ray.d;
-        // The first hit is direct light, which the camera pass samples explicitly.
-        if depth > 0 && bsdf.has_smooth() {
+        // The first hit is direct light, which the camera pass samples explicitly; photons are
+        // kept only where the camera pass gathers them.
+        if depth > 0 && bsdf.gathers_photons() {
             out.push(Photon::new(sp.p, wi, beta));
         }
         let frame = Frame::from_normal(sp.ns);
