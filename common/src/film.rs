@@ -13,7 +13,7 @@ use crate::color::{Rgb, srgb_encode};
 pub const FIXED_SCALE: f64 = (1u64 << 24) as f64;
 
 /// Summed samples of a range of passes.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FilmSum {
     /// Width in pixels.
     pub width: u32,

@@ -5,12 +5,15 @@
 #![warn(missing_docs)]
 
 pub mod bsdf;
+pub mod bundle;
 pub mod camera;
 pub mod color;
 pub mod film;
 pub mod geometry;
 pub mod integrator;
+pub mod job;
 pub mod light;
+pub mod protocol;
 pub mod render;
 pub mod sampling;
 pub mod scene;

@@ -16,7 +16,7 @@ use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
 /// The rendering method and its parameters.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 pub enum Method {
     /// Path tracing: a pass is one path per pixel.
     Path(PathSettings),
@@ -26,7 +26,7 @@ pub enum Method {
 }
 
 /// How to render.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 pub struct RenderSettings {
     /// Seed of every random stream.
     pub seed: u64,
@@ -55,6 +55,15 @@ pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64
             let radii = s.schedule().radii(passes.clone());
             render_sppm_iterations(scene, settings.seed, s, passes, &radii)
         }
+    }
+}
+
+/// Renders passes `passes` of a batch: the farm's unit of work. For SPPM, `radii` holds the
+/// radius of each pass (from the coordinator); for path tracing it is ignored.
+pub fn render_batch(scene: &Scene, settings: &RenderSettings, passes: Range<u64>, radii: &[f32]) -> FilmSum {
+    match &settings.method {
+        Method::Path(_) => render_passes(scene, settings, passes),
+        Method::Sppm(s) => render_sppm_iterations(scene, settings.seed, s, passes, radii),
     }
 }
 

@@ -1,11 +1,12 @@
-//! The command line, documented flag by flag (`coordinator help render` prints this).
+//! The command line, documented flag by flag (`coordinator help SUBCOMMAND` prints this).
 
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
 
-/// Photonfarm: a physically based renderer (path tracing, and progressive photon mapping to come)
-/// for Mitsuba 3 XML scenes.
+/// Photonfarm: a physically based renderer for Mitsuba 3 XML scenes (path tracing and
+/// progressive photon mapping), and the coordinator of its render farm.
 #[derive(Debug, Parser)]
 #[command(version, about)]
 pub struct Cli {
@@ -19,6 +20,10 @@ pub struct Cli {
 pub enum Command {
     /// Render a scene on this machine and write the image.
     Render(RenderArgs),
+    /// Run the farm's coordinator service.
+    Serve(ServeArgs),
+    /// Submit a scene to a coordinator; optionally wait and download the image.
+    Submit(SubmitArgs),
 }
 
 /// The rendering method.
@@ -31,23 +36,20 @@ pub enum Integrator {
     Sppm,
 }
 
-/// `coordinator render`.
+/// What to render: shared by `render` and `submit`.
 #[derive(Debug, clap::Args)]
-pub struct RenderArgs {
+pub struct JobArgs {
     /// The Mitsuba 3 XML scene file.
     pub scene: PathBuf,
-    /// Output image: .exr (linear 32-bit float) or .png (sRGB, 8-bit).
-    #[arg(long, short)]
-    pub out: PathBuf,
     /// Rendering method.
     #[arg(long, value_enum, default_value = "path")]
     pub integrator: Integrator,
-    /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count, or
-    /// no limit when --time-limit is given.
+    /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count
+    /// (`render`: no limit when --time-limit is given).
     #[arg(long)]
     pub spp: Option<u64>,
     /// SPPM: iterations (each a photon pass and one sample per pixel). Default: the scene's
-    /// sampler sample_count, or no limit when --time-limit is given.
+    /// sampler sample_count (`render`: no limit when --time-limit is given).
     #[arg(long)]
     pub iterations: Option<u64>,
     /// SPPM: photons emitted per iteration [default: the scene's photon_count, else 200000].
@@ -65,22 +67,122 @@ pub struct RenderArgs {
     /// [default: 1.1].
     #[arg(long, allow_negative_numbers = true)]
     pub k: Option<f32>,
-    /// Write the image so far every N passes or iterations, next to --out with the count in
-    /// the name (out-000256.exr).
-    #[arg(long, value_name = "N")]
-    pub checkpoint_every: Option<u64>,
-    /// Stop after this many seconds, at the end of the pass under way.
-    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
-    pub time_limit: Option<f64>,
     /// Seed of every random number: the same seed gives the same image bytes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Worker threads (default: one per core). Does not change the image.
-    #[arg(long)]
-    pub threads: Option<usize>,
+    /// Write the image so far every N passes or iterations (`render`: next to --out as
+    /// out-000256.exr; `submit`: the job's latest image) [submit default: 64].
+    #[arg(long, value_name = "N")]
+    pub checkpoint_every: Option<u64>,
     /// Override a scene parameter declared with <default name=... value=...>; repeatable.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+}
+
+impl JobArgs {
+    /// The settings these flags ask for.
+    pub fn settings(&self) -> anyhow::Result<JobSettings> {
+        let integrator = match self.integrator {
+            Integrator::Path => JobIntegrator::Path,
+            Integrator::Sppm => JobIntegrator::Sppm,
+        };
+        let passes = match (integrator, self.spp, self.iterations) {
+            (JobIntegrator::Path, spp, None) => spp,
+            (JobIntegrator::Path, _, Some(_)) => {
+                anyhow::bail!("--iterations applies to --integrator sppm; use --spp")
+            }
+            (JobIntegrator::Sppm, None, it) => it,
+            (JobIntegrator::Sppm, Some(_), _) => {
+                anyhow::bail!("SPPM counts iterations: use --iterations, not --spp")
+            }
+        };
+        if integrator == JobIntegrator::Path {
+            for (flag, given) in [
+                ("--photons", self.photons.is_some()),
+                ("--radius", self.radius.is_some()),
+                ("--alpha", self.alpha.is_some()),
+                ("--k", self.k.is_some()),
+            ] {
+                if given {
+                    anyhow::bail!("{flag} applies to --integrator sppm");
+                }
+            }
+        }
+        Ok(JobSettings {
+            integrator,
+            passes,
+            photons: self.photons,
+            radius: self.radius,
+            alpha: self.alpha,
+            k: self.k,
+            defines: self.define.clone(),
+            seed: self.seed,
+            checkpoint_every: self.checkpoint_every,
+        })
+    }
+}
+
+/// `coordinator render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// What to render.
+    #[command(flatten)]
+    pub job: JobArgs,
+    /// Output image: .exr (linear 32-bit float) or .png (sRGB, 8-bit).
+    #[arg(long, short)]
+    pub out: PathBuf,
+    /// Stop after this many seconds, at the end of the batch under way.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub time_limit: Option<f64>,
+    /// Worker threads (default: one per core). Does not change the image.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// `coordinator serve`.
+#[derive(Debug, clap::Args)]
+pub struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub bind: String,
+    /// Data folder: the SQLite database, job bundles, partial sums and images.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Require `Authorization: Bearer TOKEN` on every request.
+    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Largest upload (a job bundle or a batch result), in MiB.
+    #[arg(long, default_value_t = 512)]
+    pub max_upload_mb: usize,
+    /// Seconds without a heartbeat after which a batch goes to another worker.
+    #[arg(long, default_value_t = 30.0)]
+    pub lease_timeout: f64,
+    /// Batches aim at this many seconds on the worker that renders them.
+    #[arg(long, default_value_t = 5.0)]
+    pub batch_seconds: f64,
+    /// Checkpoint interval (passes) of jobs that do not set one.
+    #[arg(long, default_value_t = 64)]
+    pub checkpoint_every: u64,
+}
+
+/// `coordinator submit`.
+#[derive(Debug, clap::Args)]
+pub struct SubmitArgs {
+    /// The coordinator's URL, e.g. http://render-host:8080.
+    #[arg(long)]
+    pub to: String,
+    /// What to render.
+    #[command(flatten)]
+    pub job: JobArgs,
+    /// Bearer token, if the coordinator requires one.
+    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Wait for the job to finish, showing progress.
+    #[arg(long)]
+    pub wait: bool,
+    /// With --wait: where to write the final image (.exr or .png).
+    #[arg(long, short, requires = "wait")]
+    pub out: Option<PathBuf>,
 }
 
 fn parse_define(s: &str) -> Result<(String, String), String> {
@@ -94,5 +196,7 @@ fn parse_define(s: &str) -> Result<(String, String), String> {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Render(args) => crate::render_command::run(&args),
+        Command::Serve(args) => crate::serve_command::run(args),
+        Command::Submit(args) => crate::client::run_submit(&args),
     }
 }

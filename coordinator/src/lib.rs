@@ -3,6 +3,15 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod accumulator;
+pub mod api;
 pub mod cli;
+pub mod client;
+pub mod farm;
+pub mod logging;
 pub mod progress;
 pub mod render_command;
+pub mod scheduler;
+pub mod serve_command;
+pub mod service;
+pub mod store;

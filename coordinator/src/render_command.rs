@@ -1,95 +1,52 @@
-//! `coordinator render`: load, render on this machine, write.
+//! `coordinator render`: the farm's flow with an in-process worker.
+//!
+//! The same [`Scheduler`] hands out batches and the same [`Accumulator`] merges them as in the
+//! farm, so a local render and a farm render of the same settings give the same bytes, and
+//! checkpoints fall on the same pass counts.
 
-use std::time::Duration;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use std::path::{Path, PathBuf};
-
-use photonfarm::integrator::path::PathSettings;
-use photonfarm::integrator::sppm::SppmSettings;
-use photonfarm::render::{Budget, Method, RenderSettings, render_progressive};
+use photonfarm::film::FilmSum;
+use photonfarm::render::{Method, render_batch};
 use photonfarm::scene::Scene;
 
-use crate::cli::{Integrator, RenderArgs};
+use crate::accumulator::Accumulator;
+use crate::cli::RenderArgs;
 use crate::progress::Reporter;
+use crate::scheduler::{JobState, Scheduler, SchedulerConfig};
 
-/// Renders `args.scene` to `args.out`.
+/// Renders `args.job.scene` to `args.out`.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
-    // Check the output first: a typo must not cost a long render.
+    // Check everything cheap first: a typo must not cost a long render.
     check_output(&args.out)?;
     if let Some(t) = args.time_limit
         && !(t > 0.0 && t.is_finite())
     {
         bail!("--time-limit must be a positive number of seconds, not {t}");
     }
-    if args.spp == Some(0) || args.iterations == Some(0) {
-        bail!("--spp and --iterations must be at least 1");
-    }
     if args.threads == Some(0) {
         bail!("--threads must be at least 1");
     }
-    if args.checkpoint_every == Some(0) {
-        bail!("--checkpoint-every must be at least 1");
-    }
-    let sppm_flags = [
-        ("--iterations", args.iterations.is_some()),
-        ("--photons", args.photons.is_some()),
-        ("--radius", args.radius.is_some()),
-        ("--alpha", args.alpha.is_some()),
-        ("--k", args.k.is_some()),
-    ];
-    match args.integrator {
-        Integrator::Path => {
-            if let Some((flag, _)) = sppm_flags.iter().find(|(_, given)| *given) {
-                bail!("{flag} applies to --integrator sppm");
-            }
-        }
-        Integrator::Sppm if args.spp.is_some() => {
-            bail!("SPPM counts iterations: use --iterations, not --spp")
-        }
-        Integrator::Sppm => {}
-    }
-    let scene = Scene::load(&args.scene, &args.define)?;
+    let settings = args.job.settings()?;
+    let scene = Scene::load(&args.job.scene, &settings.defines)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
-    let (method, count, unit) = match args.integrator {
-        Integrator::Path => (Method::Path(PathSettings::from_scene(&scene)), args.spp, "passes"),
-        Integrator::Sppm => {
-            let (mut s, warnings) = SppmSettings::from_scene(&scene);
-            for w in warnings {
-                eprintln!("warning: {w}");
-            }
-            s.photons = args.photons.unwrap_or(s.photons);
-            s.initial_radius = args.radius.unwrap_or(s.initial_radius);
-            s.alpha = args.alpha.unwrap_or(s.alpha);
-            s.k = args.k.unwrap_or(s.k);
-            s.validate()?;
+    let resolved = settings.resolve(&scene, args.time_limit.is_some())?;
+    for w in &resolved.warnings {
+        eprintln!("warning: {w}");
+    }
+    let (unit, radii_schedule) = match &resolved.render.method {
+        Method::Path(_) => ("passes", None),
+        Method::Sppm(s) => {
             eprintln!(
                 "SPPM: {} photons per iteration, initial radius {:.4e}, alpha {:.3}, k {}",
                 s.photons, s.initial_radius, s.alpha, s.k
             );
-            let declared = scene
-                .integrator
-                .params
-                .iter()
-                .find(|(n, _)| n == "iterations")
-                .map(|(_, v)| *v as u64);
-            (Method::Sppm(s), args.iterations.or(declared), "iterations")
+            ("iterations", Some(s.schedule()))
         }
-    };
-    let budget = Budget {
-        passes: match (count, args.time_limit) {
-            (Some(n), _) => Some(n),
-            (None, Some(_)) => None,
-            (None, None) => Some(scene.spp as u64),
-        },
-        time_limit: args.time_limit.map(Duration::from_secs_f64),
-        checkpoint_every: args.checkpoint_every,
-    };
-    let settings = RenderSettings {
-        seed: args.seed,
-        method,
     };
     let threads = args
         .threads
@@ -100,28 +57,58 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .context("cannot start the render threads")?;
     eprintln!(
         "rendering {} ({}x{}, {} shapes, {} lights) with {threads} thread(s)",
-        args.scene.display(),
+        args.job.scene.display(),
         scene.width(),
         scene.height(),
         scene.shapes.len(),
         scene.lights.len()
     );
-    let mut reporter = Reporter::new(budget.passes, unit);
+
+    // The farm's scheduler with one in-process worker; short batches keep progress and the
+    // time limit responsive.
+    let mut scheduler = Scheduler::new(
+        SchedulerConfig {
+            lease_timeout_ms: u64::MAX / 4,
+            target_batch_ms: 500,
+            max_batch: 1 << 16,
+        },
+        1,
+    );
+    let total = resolved.passes.unwrap_or(u64::MAX);
+    let window = settings.checkpoint_every.unwrap_or(1 << 40);
+    scheduler.add_job(0, total, window, 0, &[], JobState::Queued);
+    let mut acc = Accumulator::new(FilmSum::new(scene.width(), scene.height()), window);
+    let start = Instant::now();
+    let limit = args.time_limit.map(Duration::from_secs_f64);
+    let mut reporter = Reporter::new(resolved.passes, unit);
     let mut checkpoint_error = None;
-    let film = pool.install(|| {
-        render_progressive(&scene, &settings, budget, |p, film| {
-            reporter.update(p.done, p.total, p.elapsed);
-            let due = args.checkpoint_every.is_some_and(|n| p.done % n == 0);
-            if due && checkpoint_error.is_none() {
-                let path = checkpoint_path(&args.out, p.done);
-                if let Err(e) = film.write(&path) {
-                    // Keep rendering: the final image may still be written elsewhere.
-                    checkpoint_error = Some(e.to_string());
-                }
+    let now = || start.elapsed().as_millis() as u64;
+    loop {
+        if limit.is_some_and(|l| start.elapsed() >= l) {
+            scheduler.close(0);
+        }
+        let Some(grant) = scheduler.lease("local", now()) else {
+            break;
+        };
+        let radii = radii_schedule
+            .map(|s| s.radii(grant.start..grant.end))
+            .unwrap_or_default();
+        let sum = pool.install(|| render_batch(&scene, &resolved.render, grant.start..grant.end, &radii));
+        scheduler.complete(grant.lease_id, now())?;
+        let (checkpoints, _) = acc.add(grant.start, sum)?;
+        for cp in checkpoints {
+            if cp.passes < total
+                && checkpoint_error.is_none()
+                && let Err(e) = cp.write(&checkpoint_path(&args.out, cp.passes))
+            {
+                // Keep rendering: the final image may still be written.
+                checkpoint_error = Some(e.to_string());
             }
-        })
-    });
+        }
+        reporter.update(acc.prefix_passes(), resolved.passes, start.elapsed());
+    }
     reporter.finish();
+    let film = acc.prefix();
     if film.nonfinite > 0 {
         eprintln!(
             "warning: {} samples were NaN or infinite and were left out of the image",
@@ -132,7 +119,19 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         eprintln!("warning: checkpoints stopped: {e}");
     }
     film.write(&args.out)?;
-    eprintln!("wrote {} ({} {unit})", args.out.display(), film.passes);
+    if settings
+        .checkpoint_every
+        .is_some_and(|n| film.passes.is_multiple_of(n))
+    {
+        // The last checkpoint is the final image.
+        let _ = std::fs::copy(&args.out, checkpoint_path(&args.out, film.passes));
+    }
+    eprintln!(
+        "wrote {} ({} {unit} in {:.1} s)",
+        args.out.display(),
+        film.passes,
+        start.elapsed().as_secs_f64()
+    );
     Ok(())
 }
 
@@ -143,7 +142,8 @@ pub fn checkpoint_path(out: &Path, count: u64) -> PathBuf {
     out.with_file_name(format!("{stem}-{count:06}.{ext}"))
 }
 
-fn check_output(out: &std::path::Path) -> anyhow::Result<()> {
+/// Fails early on an output the render could not write.
+pub fn check_output(out: &Path) -> anyhow::Result<()> {
     let ext = out
         .extension()
         .and_then(|e| e.to_str())

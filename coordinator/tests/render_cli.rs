@@ -85,7 +85,7 @@ fn time_limit_renders_whole_passes() {
     ]);
     assert!(o.status.success());
     let log = String::from_utf8_lossy(&o.stderr);
-    assert!(log.contains("passes)"), "{log}");
+    assert!(log.contains(" passes in "), "{log}");
     assert!(out.exists());
 }
 

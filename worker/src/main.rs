@@ -1,11 +1,72 @@
-//! `worker`: the render farm's worker process. It joins the farm with the coordinator service
-//! (issue 5); until then it only builds, so that the workspace has its final shape.
+//! `worker`: parses the command line and runs the pull loop until SIGTERM or ctrl-c.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
+use clap::Parser;
+
+/// Photonfarm's render farm worker: asks a coordinator for batches of passes, renders them
+/// with all its threads, and sends back the partial images. It needs only outbound connections.
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Args {
+    /// The coordinator's URL, e.g. http://render-host:8080.
+    #[arg(long)]
+    coordinator: String,
+    /// Render threads (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Bearer token, if the coordinator requires one.
+    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// This worker's name in the coordinator's job status (default: host name and process id).
+    #[arg(long)]
+    name: Option<String>,
+    /// Folder for downloaded job bundles (default: a folder in the system's temporary folder).
+    #[arg(long)]
+    cache: Option<PathBuf>,
+}
+
 fn main() -> ExitCode {
-    eprintln!(
-        "worker: the render farm is not available yet; render on one machine with `coordinator render`"
-    );
-    ExitCode::FAILURE
+    let args = Args::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .try_init();
+    let name = args.name.unwrap_or_else(|| {
+        let host = std::env::var("HOSTNAME").unwrap_or_else(|_| "worker".into());
+        format!("{host}-{}", std::process::id())
+    });
+    let config = worker::WorkerConfig {
+        coordinator: args.coordinator,
+        threads: args
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        token: args.token,
+        cache: args
+            .cache
+            .unwrap_or_else(|| std::env::temp_dir().join(format!("photonfarm-worker-{name}"))),
+        name,
+    };
+    if config.threads == 0 {
+        eprintln!("error: --threads must be at least 1");
+        return ExitCode::FAILURE;
+    }
+    let rt = match tokio::runtime::Runtime::new() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(worker::run(config, worker::shutdown_signal())) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -13,7 +13,7 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 
 /// Path tracer settings.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 pub struct PathSettings {
     /// Longest path in Mitsuba's meaning: 1 renders emitters seen directly, 2 adds direct
     /// light, and so on; `None` is unlimited (Russian roulette ends paths).

@@ -51,6 +51,7 @@ struct Builder<'a> {
     area_emitters: Vec<(u32, Rgb)>,
     lights: Vec<Light>,
     warnings: Vec<String>,
+    files: Vec<std::path::PathBuf>,
 }
 
 impl<'a> Builder<'a> {
@@ -64,6 +65,7 @@ impl<'a> Builder<'a> {
             area_emitters: Vec::new(),
             lights: Vec::new(),
             warnings: Vec::new(),
+            files: Vec::new(),
         }
     }
 
@@ -135,6 +137,7 @@ impl<'a> Builder<'a> {
             spp,
             integrator,
             warnings: self.warnings,
+            files: self.files,
         })
     }
 
@@ -545,6 +548,7 @@ impl<'a> Builder<'a> {
                     .string("filename")?
                     .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
                 let path = p.file_in_scene_dir(name)?;
+                self.files.push(std::path::PathBuf::from(name));
                 let mut m = if kind == "obj" {
                     mesh::load_obj(&path)
                 } else {

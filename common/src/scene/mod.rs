@@ -73,6 +73,9 @@ pub struct Scene {
     pub integrator: IntegratorDecl,
     /// Things the user should know that do not stop the render.
     pub warnings: Vec<String>,
+    /// Files the scene reads besides itself (meshes), relative to its folder: what a job
+    /// bundle must carry.
+    pub files: Vec<PathBuf>,
 }
 
 impl Scene {

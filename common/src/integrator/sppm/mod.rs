@@ -21,7 +21,7 @@ pub use trace::{power_unit, trace_photons};
 use crate::scene::Scene;
 
 /// SPPM's parameters.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SppmSettings {
     /// Photons emitted per iteration.
     pub photons: u64,

@@ -1,0 +1,179 @@
+//! Job bundles: a scene file and the files it references, as one tar archive.
+//!
+//! The archive is content-addressed (SHA-256), so the coordinator stores each bundle once and
+//! workers fetch it once. Unpacking accepts only plain relative paths, regular files and
+//! folders: no absolute paths, no `..`, no links, so a bundle can never write or point outside
+//! its own folder.
+
+use std::io::Read;
+use std::path::{Component, Path, PathBuf};
+
+use sha2::{Digest, Sha256};
+
+/// Why a bundle was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum BundleError {
+    /// An entry would leave the bundle's folder or is not a plain file or folder.
+    #[error("bundle entry \"{0}\" is not allowed: {1}")]
+    Entry(String, &'static str),
+    /// The archive could not be read.
+    #[error("malformed bundle archive: {0}")]
+    Archive(String),
+    /// A file could not be read or written.
+    #[error("{0}: {1}")]
+    Io(String, std::io::Error),
+}
+
+/// Hex SHA-256 of the archive: the bundle's name.
+pub fn content_hash(bytes: &[u8]) -> String {
+    hex::encode(Sha256::digest(bytes))
+}
+
+/// Whether a relative path stays inside its folder.
+fn is_plain_relative(p: &Path) -> bool {
+    !p.as_os_str().is_empty()
+        && p.components()
+            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
+}
+
+/// Packs `scene` and `files` (relative to the scene's folder) into a tar archive, with the
+/// scene at the archive's top level.
+pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<Vec<u8>, BundleError> {
+    let dir = scene.parent().unwrap_or(Path::new("."));
+    let mut builder = tar::Builder::new(Vec::new());
+    let mut add = |rel: &Path| -> Result<(), BundleError> {
+        if !is_plain_relative(rel) {
+            return Err(BundleError::Entry(
+                rel.display().to_string(),
+                "leaves the scene's folder",
+            ));
+        }
+        let full = dir.join(rel);
+        let data = std::fs::read(&full).map_err(|e| BundleError::Io(full.display().to_string(), e))?;
+        let mut header = tar::Header::new_gnu();
+        header.set_size(data.len() as u64);
+        header.set_mode(0o644);
+        header.set_mtime(0); // the same files always give the same archive, so the same hash
+        header.set_cksum();
+        builder
+            .append_data(&mut header, rel, data.as_slice())
+            .map_err(|e| BundleError::Io(rel.display().to_string(), e))
+    };
+    let name = PathBuf::from(
+        scene
+            .file_name()
+            .ok_or_else(|| BundleError::Entry(scene.display().to_string(), "not a file"))?,
+    );
+    add(&name)?;
+    let mut seen = std::collections::BTreeSet::new();
+    for f in files {
+        if seen.insert(f.clone()) {
+            add(f)?;
+        }
+    }
+    builder
+        .into_inner()
+        .map_err(|e| BundleError::Io("archive".into(), e))
+}
+
+/// Unpacks `bytes` into `dest` (created if missing), refusing anything but plain files and
+/// folders at plain relative paths. Returns the files written.
+pub fn unpack(bytes: &[u8], dest: &Path) -> Result<Vec<PathBuf>, BundleError> {
+    std::fs::create_dir_all(dest).map_err(|e| BundleError::Io(dest.display().to_string(), e))?;
+    let mut archive = tar::Archive::new(bytes);
+    let mut written = Vec::new();
+    let entries = archive
+        .entries()
+        .map_err(|e| BundleError::Archive(e.to_string()))?;
+    for entry in entries {
+        let mut entry = entry.map_err(|e| BundleError::Archive(e.to_string()))?;
+        let path = entry
+            .path()
+            .map_err(|e| BundleError::Archive(e.to_string()))?
+            .into_owned();
+        let shown = path.display().to_string();
+        if !is_plain_relative(&path) {
+            return Err(BundleError::Entry(shown, "absolute paths and '..' are refused"));
+        }
+        let target = dest.join(&path);
+        match entry.header().entry_type() {
+            tar::EntryType::Directory => {
+                std::fs::create_dir_all(&target).map_err(|e| BundleError::Io(shown, e))?;
+            }
+            tar::EntryType::Regular | tar::EntryType::Continuous => {
+                if let Some(parent) = target.parent() {
+                    std::fs::create_dir_all(parent).map_err(|e| BundleError::Io(shown.clone(), e))?;
+                }
+                let mut data = Vec::new();
+                entry
+                    .read_to_end(&mut data)
+                    .map_err(|e| BundleError::Io(shown.clone(), e))?;
+                std::fs::write(&target, data).map_err(|e| BundleError::Io(shown, e))?;
+                written.push(path);
+            }
+            _ => {
+                return Err(BundleError::Entry(
+                    shown,
+                    "only regular files and folders are allowed",
+                ));
+            }
+        }
+    }
+    Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packs_unpacks_and_hashes_deterministically() {
+        let src = tempfile::tempdir().unwrap();
+        std::fs::create_dir(src.path().join("meshes")).unwrap();
+        std::fs::write(src.path().join("scene.xml"), "<scene/>").unwrap();
+        std::fs::write(src.path().join("meshes/a.obj"), "v 0 0 0").unwrap();
+        let files = vec![PathBuf::from("meshes/a.obj")];
+        let a = pack(&src.path().join("scene.xml"), &files).unwrap();
+        let b = pack(&src.path().join("scene.xml"), &files).unwrap();
+        assert_eq!(content_hash(&a), content_hash(&b));
+        let dst = tempfile::tempdir().unwrap();
+        let written = unpack(&a, dst.path()).unwrap();
+        assert_eq!(written.len(), 2);
+        assert_eq!(
+            std::fs::read_to_string(dst.path().join("meshes/a.obj")).unwrap(),
+            "v 0 0 0"
+        );
+        assert!(pack(&src.path().join("scene.xml"), &[PathBuf::from("../x")]).is_err());
+    }
+
+    #[test]
+    fn refuses_traversal_and_links() {
+        // A hand-made archive with "../evil": the tar crate's builder refuses to write it, so
+        // write the header bytes directly.
+        let mut header = tar::Header::new_old();
+        header.as_old_mut().name[..7].copy_from_slice(b"../evil");
+        header.set_size(1);
+        header.set_mode(0o644);
+        header.set_entry_type(tar::EntryType::Regular);
+        header.set_cksum();
+        let mut bytes = header.as_bytes().to_vec();
+        bytes.extend_from_slice(b"x");
+        bytes.resize(bytes.len() + 511, 0);
+        bytes.extend_from_slice(&[0; 1024]);
+        let dst = tempfile::tempdir().unwrap();
+        let e = unpack(&bytes, &dst.path().join("b")).unwrap_err().to_string();
+        assert!(e.contains("../evil"), "{e}");
+        assert!(!dst.path().join("evil").exists());
+
+        let mut b = tar::Builder::new(Vec::new());
+        let mut h = tar::Header::new_gnu();
+        h.set_entry_type(tar::EntryType::Symlink);
+        h.set_size(0);
+        b.append_link(&mut h, "link", "/etc/passwd").unwrap();
+        let e = unpack(&b.into_inner().unwrap(), dst.path())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("only regular files"), "{e}");
+        assert!(unpack(b"garbage that is not a tar archive at all", dst.path()).is_err());
+    }
+}

@@ -1,0 +1,128 @@
+//! What the coordinator and the workers send each other, and the one binary codec.
+//!
+//! JSON for the small control messages; bincode (2.x, pinned: its 2.x line is the last that
+//! builds) for partial images, which are large. Only this module knows the codec, so it can be
+//! swapped without touching either program.
+
+use serde::{Deserialize, Serialize};
+
+use crate::film::FilmSum;
+use crate::render::RenderSettings;
+
+/// A worker asking for work.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LeaseRequest {
+    /// The worker's name (for logs, job status and failure tracking).
+    pub worker: String,
+    /// Threads it renders with (a hint for the batch size).
+    pub threads: u32,
+}
+
+/// A batch of passes lent to a worker until `deadline_ms` from now, renewable by heartbeats.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Lease {
+    /// The lease: results and heartbeats refer to it.
+    pub lease_id: u64,
+    /// The job.
+    pub job_id: u64,
+    /// First pass of the batch.
+    pub start: u64,
+    /// One past the last pass.
+    pub end: u64,
+    /// SPPM: the radius of each pass of the batch, from the coordinator's schedule, so every
+    /// machine uses the same radii whatever its maths library. Empty for path tracing.
+    pub radii: Vec<f32>,
+    /// What to render.
+    pub settings: RenderSettings,
+    /// Content hash of the job's bundle (scene and files), to fetch it once and cache it.
+    pub bundle: String,
+    /// The scene file's path inside the bundle.
+    pub scene: String,
+    /// `-D` parameters for loading the scene.
+    pub defines: Vec<(String, String)>,
+    /// Milliseconds until the lease expires without a heartbeat.
+    pub deadline_ms: u64,
+    /// How often to heartbeat, in milliseconds.
+    pub heartbeat_ms: u64,
+}
+
+/// The coordinator's answer to a heartbeat.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HeartbeatReply {
+    /// Milliseconds until the lease now expires.
+    pub deadline_ms: u64,
+}
+
+/// A worker giving up a batch (it failed, or the worker is shutting down).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Release {
+    /// Why; None for a clean hand-back (shutdown), which does not count as a failure.
+    pub error: Option<String>,
+}
+
+/// Why a payload could not be decoded.
+#[derive(Debug, thiserror::Error)]
+pub enum CodecError {
+    /// Not a valid encoding.
+    #[error("malformed batch result: {0}")]
+    Decode(String),
+    /// Decoded, but inconsistent.
+    #[error("inconsistent batch result: {0}")]
+    Invalid(String),
+}
+
+const MAGIC: &[u8; 8] = b"PFBATCH1";
+
+/// Encodes a partial image.
+pub fn encode_batch(sum: &FilmSum) -> Vec<u8> {
+    let mut out = MAGIC.to_vec();
+    out.extend(
+        bincode::serde::encode_to_vec(sum, bincode::config::standard()).expect("FilmSum always encodes"),
+    );
+    out
+}
+
+/// Decodes a partial image and checks that it is whole.
+pub fn decode_batch(bytes: &[u8]) -> Result<FilmSum, CodecError> {
+    let body = bytes
+        .strip_prefix(MAGIC.as_slice())
+        .ok_or_else(|| CodecError::Decode("missing the PFBATCH1 header".into()))?;
+    let (sum, used): (FilmSum, usize) = bincode::serde::decode_from_slice(body, bincode::config::standard())
+        .map_err(|e| CodecError::Decode(e.to_string()))?;
+    if used != body.len() {
+        return Err(CodecError::Invalid(format!(
+            "{} trailing bytes",
+            body.len() - used
+        )));
+    }
+    if sum.sums.len() as u64 != sum.width as u64 * sum.height as u64 {
+        return Err(CodecError::Invalid(format!(
+            "{} pixels for a {}x{} image",
+            sum.sums.len(),
+            sum.width,
+            sum.height
+        )));
+    }
+    Ok(sum)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_rejects_garbage() {
+        let mut f = FilmSum::new(3, 2);
+        f.sums[4] = [1, -2, 1 << 40];
+        f.passes = 7;
+        let bytes = encode_batch(&f);
+        assert_eq!(decode_batch(&bytes).unwrap(), f);
+        assert!(decode_batch(b"nonsense").is_err());
+        assert!(decode_batch(&bytes[..bytes.len() - 3]).is_err());
+        let mut extra = bytes.clone();
+        extra.push(0);
+        assert!(decode_batch(&extra).is_err());
+    }
+}

@@ -1,0 +1,570 @@
+//! Who renders which passes: the iteration counter, batches, leases and their deadlines.
+//!
+//! Pure logic: no I/O and no clock (the caller passes the time in milliseconds), so every rule
+//! is unit-tested here and the same scheduler drives both the farm and `coordinator render`.
+//!
+//! Rules:
+//! - Passes are handed out in increasing order; a batch never crosses a multiple of the job's
+//!   window (its checkpoint interval), so checkpoints fall on batch boundaries.
+//! - A batch is a lease with a deadline; heartbeats extend it. An expired or released lease's
+//!   range goes back to the job and is handed out again before new passes.
+//! - A result counts only for a live lease, once: the lease is gone after it.
+//! - A worker that failed a range twice never gets that range again; a range that failed on
+//!   three workers fails the job.
+//! - Batch sizes aim at a target duration from each worker's measured rate on the job.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+/// Milliseconds on the caller's monotonic clock.
+pub type Millis = u64;
+
+/// Scheduling parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct SchedulerConfig {
+    /// A lease without a heartbeat for this long expires.
+    pub lease_timeout_ms: Millis,
+    /// Batches aim to take about this long on the worker that renders them.
+    pub target_batch_ms: Millis,
+    /// Largest batch, whatever the rate.
+    pub max_batch: u64,
+}
+
+impl Default for SchedulerConfig {
+    fn default() -> Self {
+        SchedulerConfig {
+            lease_timeout_ms: 30_000,
+            target_batch_ms: 5_000,
+            max_batch: 4096,
+        }
+    }
+}
+
+/// A job's lifecycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Accepted, nothing rendered yet.
+    Queued,
+    /// Some passes rendered.
+    Running,
+    /// Every pass rendered.
+    Done,
+    /// A batch failed on too many workers.
+    Failed,
+    /// Cancelled by a user.
+    Cancelled,
+}
+
+impl JobState {
+    /// Whether the job will never change again.
+    pub fn is_final(self) -> bool {
+        matches!(self, JobState::Done | JobState::Failed | JobState::Cancelled)
+    }
+
+    /// The name used in the API and the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Done => "done",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    /// Parses [`JobState::as_str`].
+    pub fn parse(s: &str) -> Option<JobState> {
+        [
+            JobState::Queued,
+            JobState::Running,
+            JobState::Done,
+            JobState::Failed,
+            JobState::Cancelled,
+        ]
+        .into_iter()
+        .find(|j| j.as_str() == s)
+    }
+}
+
+/// A granted batch.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Grant {
+    /// Lease id.
+    pub lease_id: u64,
+    /// Job id.
+    pub job_id: u64,
+    /// First pass.
+    pub start: u64,
+    /// One past the last pass.
+    pub end: u64,
+}
+
+/// Why a lease operation was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum LeaseError {
+    /// No such lease: never granted, already completed, expired or reassigned.
+    #[error("lease {0} is not active (it expired, was completed or was reassigned)")]
+    NotActive(u64),
+    /// The job was cancelled or failed.
+    #[error("job {0} is no longer running")]
+    JobOver(u64),
+}
+
+#[derive(Clone, Debug)]
+struct LeaseInfo {
+    job: u64,
+    start: u64,
+    end: u64,
+    worker: String,
+    issued: Millis,
+    deadline: Millis,
+}
+
+#[derive(Clone, Debug)]
+struct JobSched {
+    total: u64,
+    window: u64,
+    next_start: u64,
+    free: BTreeSet<(u64, u64)>,
+    completed: u64,
+    state: JobState,
+    message: Option<String>,
+    /// (range start, worker) → failures.
+    failures: HashMap<(u64, String), u32>,
+    /// Passes per millisecond, per worker, from its finished batches.
+    rates: HashMap<String, f64>,
+}
+
+/// The scheduler of all jobs.
+#[derive(Debug)]
+pub struct Scheduler {
+    config: SchedulerConfig,
+    jobs: BTreeMap<u64, JobSched>,
+    leases: BTreeMap<u64, LeaseInfo>,
+    next_lease: u64,
+}
+
+/// Failures of one range on one worker before that worker is no longer given it.
+const FAILURES_PER_WORKER: u32 = 2;
+/// Distinct workers a range may fail on before the job fails.
+const FAILING_WORKERS: usize = 3;
+
+impl Scheduler {
+    /// A scheduler whose lease ids start at `first_lease_id` (persisted across restarts, so
+    /// that a lease from before a restart can never match a new one).
+    pub fn new(config: SchedulerConfig, first_lease_id: u64) -> Scheduler {
+        Scheduler {
+            config,
+            jobs: BTreeMap::new(),
+            leases: BTreeMap::new(),
+            next_lease: first_lease_id,
+        }
+    }
+
+    /// The next lease id that will be granted.
+    pub fn next_lease_id(&self) -> u64 {
+        self.next_lease
+    }
+
+    /// Adds a job of `total` passes, aligned to `window`. `done` are ranges already rendered
+    /// (after a restart); everything else below `next_start` is handed out again.
+    pub fn add_job(
+        &mut self,
+        id: u64,
+        total: u64,
+        window: u64,
+        next_start: u64,
+        done: &[(u64, u64)],
+        state: JobState,
+    ) {
+        let window = window.max(1);
+        let mut free = BTreeSet::new();
+        let done: BTreeSet<(u64, u64)> = done.iter().copied().collect();
+        let mut cursor = 0;
+        for &(s, e) in &done {
+            if s > cursor {
+                split_into(&mut free, cursor, s.min(next_start), window);
+            }
+            cursor = cursor.max(e);
+        }
+        if next_start > cursor {
+            split_into(&mut free, cursor, next_start, window);
+        }
+        let completed = done.iter().map(|(s, e)| e - s).sum();
+        self.jobs.insert(
+            id,
+            JobSched {
+                total,
+                window,
+                next_start,
+                free,
+                completed,
+                state,
+                message: None,
+                failures: HashMap::new(),
+                rates: HashMap::new(),
+            },
+        );
+    }
+
+    /// Grants the next batch to `worker`, from the oldest job with work it may take.
+    pub fn lease(&mut self, worker: &str, now: Millis) -> Option<Grant> {
+        let config = self.config;
+        for (&job_id, job) in self.jobs.iter_mut() {
+            if job.state.is_final() {
+                continue;
+            }
+            let size = batch_size(&config, job.rates.get(worker).copied());
+            let Some(range) = take_free(job, worker, size).or_else(|| take_new(job, size)) else {
+                continue;
+            };
+            let lease_id = self.next_lease;
+            self.next_lease += 1;
+            job.state = JobState::Running;
+            self.leases.insert(
+                lease_id,
+                LeaseInfo {
+                    job: job_id,
+                    start: range.0,
+                    end: range.1,
+                    worker: worker.to_string(),
+                    issued: now,
+                    deadline: now + config.lease_timeout_ms,
+                },
+            );
+            return Some(Grant {
+                lease_id,
+                job_id,
+                start: range.0,
+                end: range.1,
+            });
+        }
+        None
+    }
+
+    /// Extends a live lease; returns its new deadline.
+    pub fn heartbeat(&mut self, lease_id: u64, now: Millis) -> Result<Millis, LeaseError> {
+        let lease = self
+            .leases
+            .get_mut(&lease_id)
+            .ok_or(LeaseError::NotActive(lease_id))?;
+        if lease.deadline < now {
+            return Err(LeaseError::NotActive(lease_id));
+        }
+        if self.jobs.get(&lease.job).is_none_or(|j| j.state.is_final()) {
+            return Err(LeaseError::JobOver(lease.job));
+        }
+        lease.deadline = now + self.config.lease_timeout_ms;
+        Ok(lease.deadline)
+    }
+
+    /// The range of a live lease, without changing anything (to check a result before storing it).
+    pub fn lease_range(&self, lease_id: u64, now: Millis) -> Result<Grant, LeaseError> {
+        let lease = self
+            .leases
+            .get(&lease_id)
+            .ok_or(LeaseError::NotActive(lease_id))?;
+        if lease.deadline < now {
+            return Err(LeaseError::NotActive(lease_id));
+        }
+        if self.jobs.get(&lease.job).is_none_or(|j| j.state.is_final()) {
+            return Err(LeaseError::JobOver(lease.job));
+        }
+        Ok(Grant {
+            lease_id,
+            job_id: lease.job,
+            start: lease.start,
+            end: lease.end,
+        })
+    }
+
+    /// Accepts a lease's result: the lease ends, its passes count once. Returns the range.
+    pub fn complete(&mut self, lease_id: u64, now: Millis) -> Result<Grant, LeaseError> {
+        let grant = self.lease_range(lease_id, now)?;
+        let lease = self.leases.remove(&lease_id).expect("checked above");
+        let job = self.jobs.get_mut(&lease.job).expect("a lease's job exists");
+        job.completed += lease.end - lease.start;
+        let elapsed = (now.saturating_sub(lease.issued)).max(1) as f64;
+        job.rates
+            .insert(lease.worker, (lease.end - lease.start) as f64 / elapsed);
+        if job.completed >= job.total {
+            job.state = JobState::Done;
+        }
+        Ok(grant)
+    }
+
+    /// Gives a lease back: after a failure (`error`), or cleanly (shutdown). Its range is handed
+    /// out again.
+    pub fn release(&mut self, lease_id: u64, error: Option<&str>) -> Result<(), LeaseError> {
+        let lease = self
+            .leases
+            .remove(&lease_id)
+            .ok_or(LeaseError::NotActive(lease_id))?;
+        let job = self.jobs.get_mut(&lease.job).expect("a lease's job exists");
+        job.free.insert((lease.start, lease.end));
+        if let Some(error) = error {
+            *job.failures
+                .entry((lease.start, lease.worker.clone()))
+                .or_default() += 1;
+            let workers = job.failures.keys().filter(|(s, _)| *s == lease.start).count();
+            if workers >= FAILING_WORKERS {
+                job.state = JobState::Failed;
+                job.message = Some(format!(
+                    "passes {}..{} failed on {workers} workers; last error: {error}",
+                    lease.start, lease.end
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends every lease whose deadline has passed; returns them (lease id, job id).
+    pub fn expire(&mut self, now: Millis) -> Vec<(u64, u64)> {
+        let expired: Vec<u64> = self
+            .leases
+            .iter()
+            .filter(|(_, l)| l.deadline < now)
+            .map(|(&id, _)| id)
+            .collect();
+        expired
+            .into_iter()
+            .map(|id| {
+                let job = self.leases[&id].job;
+                self.release(id, None).expect("listed above");
+                (id, job)
+            })
+            .collect()
+    }
+
+    /// Stops a job (cancelled by a user); its leases become void.
+    pub fn cancel(&mut self, job_id: u64) -> bool {
+        let Some(job) = self.jobs.get_mut(&job_id) else {
+            return false;
+        };
+        if !job.state.is_final() {
+            job.state = JobState::Cancelled;
+        }
+        self.leases.retain(|_, l| l.job != job_id);
+        true
+    }
+
+    /// Stops handing out new passes of a job beyond those already granted (a time limit):
+    /// the job ends when the granted ones are in.
+    pub fn close(&mut self, job_id: u64) {
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            let granted_end = job.next_start;
+            job.total = granted_end.max(job.completed);
+            job.free.retain(|&(s, _)| s < granted_end);
+            if job.completed >= job.total {
+                job.state = JobState::Done;
+            }
+        }
+    }
+
+    /// A job's state, passes completed and total, and its error message.
+    pub fn status(&self, job_id: u64) -> Option<(JobState, u64, u64, Option<String>)> {
+        self.jobs
+            .get(&job_id)
+            .map(|j| (j.state, j.completed, j.total, j.message.clone()))
+    }
+
+    /// The first pass never handed out (persisted, so a restart knows what to re-issue).
+    pub fn next_start(&self, job_id: u64) -> Option<u64> {
+        self.jobs.get(&job_id).map(|j| j.next_start)
+    }
+
+    /// Workers holding leases on a job.
+    pub fn workers_on(&self, job_id: u64) -> Vec<String> {
+        let mut w: Vec<String> = self
+            .leases
+            .values()
+            .filter(|l| l.job == job_id)
+            .map(|l| l.worker.clone())
+            .collect();
+        w.sort();
+        w.dedup();
+        w
+    }
+}
+
+fn batch_size(config: &SchedulerConfig, rate: Option<f64>) -> u64 {
+    match rate {
+        // A worker's first batch on a job is one pass: it measures the worker's speed.
+        None => 1,
+        Some(r) => ((r * config.target_batch_ms as f64) as u64).clamp(1, config.max_batch),
+    }
+}
+
+/// Splits [a, b) at window boundaries into the free set.
+fn split_into(free: &mut BTreeSet<(u64, u64)>, a: u64, b: u64, window: u64) {
+    let mut s = a;
+    while s < b {
+        let e = ((s / window + 1) * window).min(b);
+        free.insert((s, e));
+        s = e;
+    }
+}
+
+/// The first free range this worker has not failed too often, cut to `size`.
+fn take_free(job: &mut JobSched, worker: &str, size: u64) -> Option<(u64, u64)> {
+    let &(s, e) = job.free.iter().find(|(s, _)| {
+        job.failures.get(&(*s, worker.to_string())).copied().unwrap_or(0) < FAILURES_PER_WORKER
+    })?;
+    job.free.remove(&(s, e));
+    let cut = (s + size).min(e);
+    if cut < e {
+        job.free.insert((cut, e));
+    }
+    Some((s, cut))
+}
+
+/// New passes from the counter, up to `size`, never crossing a window boundary.
+fn take_new(job: &mut JobSched, size: u64) -> Option<(u64, u64)> {
+    if job.next_start >= job.total {
+        return None;
+    }
+    let s = job.next_start;
+    let window_end = (s / job.window + 1) * job.window;
+    let e = (s + size).min(window_end).min(job.total);
+    job.next_start = e;
+    Some((s, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sched() -> Scheduler {
+        Scheduler::new(
+            SchedulerConfig {
+                lease_timeout_ms: 1000,
+                target_batch_ms: 100,
+                max_batch: 1000,
+            },
+            1,
+        )
+    }
+
+    #[test]
+    fn hands_out_every_pass_once_in_order_within_windows() {
+        let mut s = sched();
+        s.add_job(7, 50, 16, 0, &[], JobState::Queued);
+        let mut t = 0;
+        let mut covered = Vec::new();
+        while let Some(g) = s.lease("w", t) {
+            assert!(g.end <= 50 && g.start < g.end);
+            assert_eq!(g.start / 16, (g.end - 1) / 16, "crosses a window: {g:?}");
+            t += 10;
+            covered.push((g.start, g.end));
+            s.complete(g.lease_id, t).unwrap();
+        }
+        let mut next = 0;
+        for (a, b) in covered {
+            assert_eq!(a, next);
+            next = b;
+        }
+        assert_eq!(next, 50);
+        assert_eq!(s.status(7).unwrap().0, JobState::Done);
+        // Batches grew from the measured rate (1 pass per 10 ms, target 100 ms).
+        assert!(s.status(7).unwrap().1 == 50);
+    }
+
+    #[test]
+    fn expired_leases_are_reissued_and_late_results_refused() {
+        let mut s = sched();
+        s.add_job(1, 4, 4, 0, &[], JobState::Queued);
+        let a = s.lease("a", 0).unwrap();
+        assert_eq!((a.start, a.end), (0, 1));
+        // No heartbeat: expires after 1000 ms.
+        assert_eq!(s.expire(1001), vec![(a.lease_id, 1)]);
+        let b = s.lease("b", 1002).unwrap();
+        assert_eq!((b.start, b.end), (0, 1), "the expired range comes first");
+        assert_eq!(
+            s.complete(a.lease_id, 1003),
+            Err(LeaseError::NotActive(a.lease_id))
+        );
+        s.complete(b.lease_id, 1004).unwrap();
+        assert_eq!(
+            s.complete(b.lease_id, 1005),
+            Err(LeaseError::NotActive(b.lease_id)),
+            "counted once"
+        );
+        assert_eq!(s.status(1).unwrap().1, 1);
+    }
+
+    #[test]
+    fn heartbeats_keep_a_lease() {
+        let mut s = sched();
+        s.add_job(1, 10, 10, 0, &[], JobState::Queued);
+        let a = s.lease("a", 0).unwrap();
+        assert_eq!(s.heartbeat(a.lease_id, 900), Ok(1900));
+        assert!(s.expire(1500).is_empty());
+        s.complete(a.lease_id, 1800).unwrap();
+        assert!(s.heartbeat(a.lease_id, 1801).is_err());
+    }
+
+    #[test]
+    fn failing_ranges_avoid_their_worker_then_fail_the_job() {
+        let mut s = sched();
+        s.add_job(1, 2, 2, 0, &[], JobState::Queued);
+        for _ in 0..2 {
+            let g = s.lease("bad", 0).unwrap();
+            assert_eq!(g.start, 0);
+            s.release(g.lease_id, Some("boom")).unwrap();
+        }
+        // "bad" no longer gets range 0; it gets the next one.
+        let g = s.lease("bad", 0).unwrap();
+        assert_eq!(g.start, 1);
+        let g0 = s.lease("other", 0).unwrap();
+        assert_eq!(g0.start, 0);
+        s.release(g0.lease_id, Some("boom")).unwrap();
+        let g0 = s.lease("third", 0).unwrap();
+        s.release(g0.lease_id, Some("boom")).unwrap();
+        let (state, _, _, msg) = s.status(1).unwrap();
+        assert_eq!(state, JobState::Failed);
+        assert!(msg.unwrap().contains("boom"));
+        assert!(s.lease("fresh", 0).is_none());
+        // A clean hand-back is not a failure.
+        let mut s = sched();
+        s.add_job(2, 1, 1, 0, &[], JobState::Queued);
+        for _ in 0..5 {
+            let g = s.lease("w", 0).unwrap();
+            s.release(g.lease_id, None).unwrap();
+        }
+        assert_eq!(s.status(2).unwrap().0, JobState::Running);
+    }
+
+    #[test]
+    fn restart_reissues_what_was_not_done() {
+        let mut s = sched();
+        s.add_job(3, 20, 8, 12, &[(0, 4), (6, 8)], JobState::Running);
+        let mut got = Vec::new();
+        while let Some(g) = s.lease("w", 0) {
+            got.push((g.start, g.end));
+            s.complete(g.lease_id, 0).unwrap();
+        }
+        got.sort();
+        // The holes (4..6, 8..12), then the rest in window-aligned batches.
+        assert_eq!(&got[..2], &[(4, 5), (5, 6)]);
+        let total: u64 = got.iter().map(|(a, b)| b - a).sum();
+        assert_eq!(total, 20 - 6);
+        assert_eq!(s.status(3).unwrap().0, JobState::Done);
+    }
+
+    #[test]
+    fn cancel_and_close() {
+        let mut s = sched();
+        s.add_job(1, 100, 10, 0, &[], JobState::Queued);
+        let g = s.lease("w", 0).unwrap();
+        assert!(s.cancel(1));
+        assert_eq!(s.complete(g.lease_id, 1), Err(LeaseError::NotActive(g.lease_id)));
+        assert!(s.lease("w", 2).is_none());
+        let mut s = sched();
+        s.add_job(2, u64::MAX, 10, 0, &[], JobState::Queued);
+        let g = s.lease("w", 0).unwrap();
+        s.close(2);
+        assert!(s.lease("w", 1).is_none());
+        s.complete(g.lease_id, 2).unwrap();
+        assert_eq!(s.status(2).unwrap().0, JobState::Done);
+    }
+}

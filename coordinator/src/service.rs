@@ -1,0 +1,98 @@
+//! `coordinator serve`: the farm as a network service.
+//!
+//! [`run`] takes a bound listener and a shutdown future, so tests start a real server on port 0
+//! and stop it at will; `main` only parses flags and waits for ctrl-c or SIGTERM.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
+use std::time::Duration;
+
+use tokio::net::TcpListener;
+
+use crate::api::{AppState, router};
+use crate::farm::{Farm, FarmConfig};
+use crate::store::Store;
+
+/// Service settings.
+#[derive(Clone, Debug)]
+pub struct ServeConfig {
+    /// Data folder (SQLite database, bundles, images).
+    pub data: PathBuf,
+    /// Bearer token required of every request, if any.
+    pub token: Option<String>,
+    /// Largest upload, bytes.
+    pub max_upload: usize,
+    /// Scheduling.
+    pub farm: FarmConfig,
+}
+
+/// Serves until `shutdown` completes, then finishes the requests under way.
+pub async fn run(
+    listener: TcpListener,
+    config: ServeConfig,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let data = config.data.clone();
+    let farm_config = config.farm;
+    let farm = tokio::task::spawn_blocking(move || -> anyhow::Result<Farm> {
+        let store = Store::open(&data)?;
+        Ok(Farm::open(store, farm_config)?)
+    })
+    .await??;
+    let state = Arc::new(AppState {
+        farm: std::sync::Mutex::new(farm),
+        token: config.token.clone(),
+        max_upload: config.max_upload,
+        uploads: AtomicU64::new(0),
+    });
+    // Leases without heartbeats expire; check several times per timeout.
+    let period = Duration::from_millis((config.farm.scheduler.lease_timeout_ms / 10).clamp(10, 1000));
+    let expiry_state = state.clone();
+    let expiry = tokio::spawn(async move {
+        let mut tick = tokio::time::interval(period);
+        loop {
+            tick.tick().await;
+            let st = expiry_state.clone();
+            let _ = tokio::task::spawn_blocking(move || {
+                let mut farm = st.farm.lock().unwrap_or_else(|p| p.into_inner());
+                if let Err(e) = farm.expire() {
+                    tracing::error!("lease expiry: {e}");
+                }
+            })
+            .await;
+        }
+    });
+    let addr = listener.local_addr()?;
+    tracing::info!(%addr, data = %config.data.display(), auth = config.token.is_some(), "serving");
+    // On standard output, for scripts (and tests) that bind port 0.
+    println!("listening on http://{addr}");
+    axum::serve(listener, router(state))
+        .with_graceful_shutdown(shutdown)
+        .await?;
+    expiry.abort();
+    Ok(())
+}
+
+/// Completes on ctrl-c or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+    tracing::info!("shutting down");
+}

@@ -1,0 +1,317 @@
+//! The coordinator's durable state: jobs in SQLite, images and partial sums as files beside it.
+//!
+//! Every file is written to a temporary name, flushed to disk and renamed, so a crash leaves
+//! either the old or the new file, never half of one. A batch result is on disk before its
+//! upload is acknowledged, so nothing a worker reported is lost. Layout under the data folder:
+//!
+//! ```text
+//! photonfarm.sqlite           jobs, completed batches not yet merged, the lease id base
+//! bundles/HASH.tar, HASH/     job bundles, content-addressed, and their unpacked files
+//! jobs/ID/prefix.bin          passes [0, N) summed (the accumulator's prefix)
+//! jobs/ID/batch-S-E.bin       results of passes [S, E) not yet merged into the prefix
+//! jobs/ID/image.exr, .png     the latest checkpoint
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use photonfarm::film::FilmSum;
+use photonfarm::protocol::{decode_batch, encode_batch};
+use rusqlite::{Connection, OptionalExtension, params};
+
+use crate::scheduler::JobState;
+
+/// Storage failures: reported as 500s and logged, never a panic.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// SQLite failed.
+    #[error("database: {0}")]
+    Db(#[from] rusqlite::Error),
+    /// A file could not be read or written.
+    #[error("{0}: {1}")]
+    Io(String, std::io::Error),
+    /// A stored file is damaged.
+    #[error("{0}: {1}")]
+    Corrupt(String, String),
+}
+
+/// A job as stored.
+#[derive(Clone, Debug)]
+pub struct JobRow {
+    /// Id.
+    pub id: u64,
+    /// Creation time, Unix milliseconds.
+    pub created_ms: u64,
+    /// The settings as submitted (JSON of `JobSettings`).
+    pub settings: String,
+    /// The resolved render settings (JSON of `RenderSettings`).
+    pub render: String,
+    /// The scene's path inside the bundle.
+    pub scene: String,
+    /// The bundle's hash.
+    pub bundle: String,
+    /// Passes in total.
+    pub total: u64,
+    /// Checkpoint interval.
+    pub window: u64,
+    /// First pass never handed out.
+    pub next_start: u64,
+    /// State.
+    pub state: JobState,
+    /// Why it failed.
+    pub message: Option<String>,
+    /// Image size.
+    pub width: u32,
+    /// Image size.
+    pub height: u32,
+}
+
+/// The data folder.
+pub struct Store {
+    dir: PathBuf,
+    db: Connection,
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
+    move |e| StoreError::Io(path.display().to_string(), e)
+}
+
+/// Writes `bytes` to `path` atomically and durably.
+pub fn write_durably(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
+    use std::io::Write;
+    let dir = path.parent().expect("stored files live in a folder");
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let tmp = path.with_extension("tmp");
+    let mut f = std::fs::File::create(&tmp).map_err(io(&tmp))?;
+    f.write_all(bytes).map_err(io(&tmp))?;
+    f.sync_all().map_err(io(&tmp))?;
+    std::fs::rename(&tmp, path).map_err(io(path))?;
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+impl Store {
+    /// Opens (or creates) the data folder.
+    pub fn open(dir: &Path) -> Result<Store, StoreError> {
+        std::fs::create_dir_all(dir.join("bundles")).map_err(io(dir))?;
+        std::fs::create_dir_all(dir.join("jobs")).map_err(io(dir))?;
+        let db = Connection::open(dir.join("photonfarm.sqlite"))?;
+        db.execute_batch(
+            "PRAGMA journal_mode = WAL;
+             PRAGMA synchronous = FULL;
+             CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value INTEGER NOT NULL);
+             CREATE TABLE IF NOT EXISTS jobs (
+                 id INTEGER PRIMARY KEY, created_ms INTEGER NOT NULL, settings TEXT NOT NULL,
+                 render TEXT NOT NULL, scene TEXT NOT NULL, bundle TEXT NOT NULL,
+                 total INTEGER NOT NULL, window INTEGER NOT NULL, next_start INTEGER NOT NULL,
+                 state TEXT NOT NULL, message TEXT, width INTEGER NOT NULL, height INTEGER NOT NULL);
+             CREATE TABLE IF NOT EXISTS batches (
+                 job INTEGER NOT NULL, start INTEGER NOT NULL, end INTEGER NOT NULL,
+                 PRIMARY KEY (job, start));",
+        )?;
+        Ok(Store {
+            dir: dir.to_path_buf(),
+            db,
+        })
+    }
+
+    /// Reserves a fresh range of lease ids for this run: ids from an earlier run can never be
+    /// granted again, so a result for a lease from before a restart is always refused.
+    pub fn reserve_lease_ids(&mut self) -> Result<u64, StoreError> {
+        let base: u64 = self
+            .db
+            .query_row("SELECT value FROM meta WHERE key = 'lease_base'", [], |r| {
+                r.get::<_, i64>(0)
+            })
+            .optional()?
+            .unwrap_or(1) as u64;
+        self.db.execute(
+            "INSERT INTO meta (key, value) VALUES ('lease_base', ?1)
+             ON CONFLICT(key) DO UPDATE SET value = excluded.value",
+            params![(base + (1 << 32)) as i64],
+        )?;
+        Ok(base)
+    }
+
+    /// Where a bundle's archive is kept.
+    pub fn bundle_archive(&self, hash: &str) -> PathBuf {
+        self.dir.join("bundles").join(format!("{hash}.tar"))
+    }
+
+    /// Where a bundle is unpacked.
+    pub fn bundle_dir(&self, hash: &str) -> PathBuf {
+        self.dir.join("bundles").join(hash)
+    }
+
+    /// A scratch folder inside the data folder (same file system, so renames work).
+    pub fn scratch_dir(&self, name: &str) -> PathBuf {
+        self.dir.join("bundles").join(format!("incoming-{name}"))
+    }
+
+    fn job_dir(&self, id: u64) -> PathBuf {
+        self.dir.join("jobs").join(id.to_string())
+    }
+
+    /// Where a job's latest checkpoint image is.
+    pub fn image_path(&self, id: u64, ext: &str) -> PathBuf {
+        self.job_dir(id).join(format!("image.{ext}"))
+    }
+
+    /// Inserts a new job; returns its id.
+    #[allow(clippy::too_many_arguments)]
+    pub fn insert_job(
+        &mut self,
+        created_ms: u64,
+        settings: &str,
+        render: &str,
+        scene: &str,
+        bundle: &str,
+        total: u64,
+        window: u64,
+        width: u32,
+        height: u32,
+    ) -> Result<u64, StoreError> {
+        self.db.execute(
+            "INSERT INTO jobs (created_ms, settings, render, scene, bundle, total, window, next_start, state,
+                               width, height)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, 0, 'queued', ?8, ?9)",
+            params![
+                created_ms as i64,
+                settings,
+                render,
+                scene,
+                bundle,
+                total as i64,
+                window as i64,
+                width,
+                height
+            ],
+        )?;
+        Ok(self.db.last_insert_rowid() as u64)
+    }
+
+    /// Records how far the counter went and the state.
+    pub fn update_job(
+        &mut self,
+        id: u64,
+        next_start: u64,
+        state: JobState,
+        message: Option<&str>,
+    ) -> Result<(), StoreError> {
+        self.db.execute(
+            "UPDATE jobs SET next_start = ?2, state = ?3, message = ?4 WHERE id = ?1",
+            params![id as i64, next_start as i64, state.as_str(), message],
+        )?;
+        Ok(())
+    }
+
+    /// Every job, oldest first.
+    pub fn load_jobs(&self) -> Result<Vec<JobRow>, StoreError> {
+        let mut stmt = self.db.prepare(
+            "SELECT id, created_ms, settings, render, scene, bundle, total, window, next_start, state, message,
+                    width, height FROM jobs ORDER BY id",
+        )?;
+        let rows = stmt.query_map([], |r| {
+            Ok(JobRow {
+                id: r.get::<_, i64>(0)? as u64,
+                created_ms: r.get::<_, i64>(1)? as u64,
+                settings: r.get(2)?,
+                render: r.get(3)?,
+                scene: r.get(4)?,
+                bundle: r.get(5)?,
+                total: r.get::<_, i64>(6)? as u64,
+                window: r.get::<_, i64>(7)? as u64,
+                next_start: r.get::<_, i64>(8)? as u64,
+                state: JobState::parse(&r.get::<_, String>(9)?).unwrap_or(JobState::Failed),
+                message: r.get(10)?,
+                width: r.get(11)?,
+                height: r.get(12)?,
+            })
+        })?;
+        Ok(rows.collect::<Result<_, _>>()?)
+    }
+
+    /// Stores a batch result durably (file first, then its row).
+    pub fn save_batch(&mut self, job: u64, start: u64, sum: &FilmSum) -> Result<(), StoreError> {
+        let end = start + sum.passes;
+        write_durably(
+            &self.job_dir(job).join(format!("batch-{start}-{end}.bin")),
+            &encode_batch(sum),
+        )?;
+        self.db.execute(
+            "INSERT OR REPLACE INTO batches (job, start, end) VALUES (?1, ?2, ?3)",
+            params![job as i64, start as i64, end as i64],
+        )?;
+        Ok(())
+    }
+
+    /// Batch results stored for a job and not yet merged into its prefix.
+    pub fn load_batches(&self, job: u64) -> Result<Vec<(u64, FilmSum)>, StoreError> {
+        let mut stmt = self
+            .db
+            .prepare("SELECT start, end FROM batches WHERE job = ?1 ORDER BY start")?;
+        let ranges: Vec<(u64, u64)> = stmt
+            .query_map(params![job as i64], |r| {
+                Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u64))
+            })?
+            .collect::<Result<_, _>>()?;
+        ranges
+            .into_iter()
+            .map(|(s, e)| {
+                let path = self.job_dir(job).join(format!("batch-{s}-{e}.bin"));
+                let bytes = std::fs::read(&path).map_err(io(&path))?;
+                let sum = decode_batch(&bytes)
+                    .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))?;
+                Ok((s, sum))
+            })
+            .collect()
+    }
+
+    /// Stores the prefix durably, then forgets the batches it contains.
+    pub fn save_prefix(&mut self, job: u64, prefix: &FilmSum) -> Result<(), StoreError> {
+        write_durably(&self.job_dir(job).join("prefix.bin"), &encode_batch(prefix))?;
+        let merged: Vec<(u64, u64)> = {
+            let mut stmt = self
+                .db
+                .prepare("SELECT start, end FROM batches WHERE job = ?1 AND end <= ?2")?;
+            stmt.query_map(params![job as i64, prefix.passes as i64], |r| {
+                Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u64))
+            })?
+            .collect::<Result<_, _>>()?
+        };
+        self.db.execute(
+            "DELETE FROM batches WHERE job = ?1 AND end <= ?2",
+            params![job as i64, prefix.passes as i64],
+        )?;
+        for (s, e) in merged {
+            let _ = std::fs::remove_file(self.job_dir(job).join(format!("batch-{s}-{e}.bin")));
+        }
+        Ok(())
+    }
+
+    /// The stored prefix, or an empty one.
+    pub fn load_prefix(&self, job: u64, width: u32, height: u32) -> Result<FilmSum, StoreError> {
+        let path = self.job_dir(job).join("prefix.bin");
+        match std::fs::read(&path) {
+            Ok(bytes) => decode_batch(&bytes)
+                .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string())),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(FilmSum::new(width, height)),
+            Err(e) => Err(StoreError::Io(path.display().to_string(), e)),
+        }
+    }
+
+    /// Writes the checkpoint images (EXR and PNG) atomically.
+    pub fn write_images(&self, job: u64, sum: &FilmSum) -> Result<(), StoreError> {
+        for ext in ["exr", "png"] {
+            let path = self.image_path(job, ext);
+            let tmp = self.job_dir(job).join(format!("image-tmp.{ext}"));
+            std::fs::create_dir_all(self.job_dir(job)).map_err(io(&tmp))?;
+            sum.write(&tmp).map_err(|e| {
+                StoreError::Io(tmp.display().to_string(), std::io::Error::other(e.to_string()))
+            })?;
+            std::fs::rename(&tmp, &path).map_err(io(&path))?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,255 @@
+//! The farm as users run it: a real `coordinator serve` process, real `worker` processes on
+//! 127.0.0.1, real HTTP, a real SQLite database and files. Each test checks the farm's image
+//! bytes against `coordinator render` with the same settings.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// A child process killed when the test ends, whatever happens.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Proc {
+    fn sigkill(&mut self) {
+        self.0.kill().unwrap();
+        self.0.wait().unwrap();
+    }
+}
+
+fn coordinator_bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_coordinator"))
+}
+
+fn worker_bin() -> PathBuf {
+    let p = coordinator_bin().with_file_name("worker");
+    assert!(
+        p.exists(),
+        "{} is missing: run `cargo test --workspace` (or build the worker)",
+        p.display()
+    );
+    p
+}
+
+fn scene() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml")
+}
+
+/// Starts `coordinator serve`; returns it and its URL.
+fn serve(data: &Path, bind: &str, extra: &[&str]) -> (Proc, String) {
+    let mut child = Command::new(coordinator_bin())
+        .args(["serve", "--bind", bind, "--data", data.to_str().unwrap()])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .trim()
+        .strip_prefix("listening on ")
+        .expect("the service announces its address")
+        .to_string();
+    (Proc(child), url)
+}
+
+fn worker(url: &str, name: &str, cache: &Path) -> Proc {
+    Proc(
+        Command::new(worker_bin())
+            .args(["--coordinator", url, "--threads", "1", "--name", name, "--cache"])
+            .arg(cache.join(name))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// The job of these tests: SPPM on cbox-spheres, small enough for CI.
+const JOB: &[&str] = &[
+    "--integrator",
+    "sppm",
+    "--iterations",
+    "40",
+    "--photons",
+    "120000",
+    "--seed",
+    "3",
+    "--checkpoint-every",
+    "16",
+    "-D",
+    "res=48",
+];
+
+fn local_render(dir: &Path) -> Vec<u8> {
+    let out = dir.join("local.exr");
+    let o = Command::new(coordinator_bin())
+        .args([
+            "render",
+            scene().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(JOB)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::read(out).unwrap()
+}
+
+fn submit(url: &str) -> u64 {
+    let o = Command::new(coordinator_bin())
+        .args(["submit", "--to", url, scene().to_str().unwrap()])
+        .args(JOB)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).trim().parse().unwrap()
+}
+
+fn status(url: &str, id: u64) -> Option<Value> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let r = reqwest::get(format!("{url}/api/jobs/{id}")).await.ok()?;
+        r.json().await.ok()
+    })
+}
+
+fn wait_until(what: &str, timeout: Duration, mut f: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !f() {
+        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn wait_done(url: &str, id: u64) -> Value {
+    let mut last = Value::Null;
+    wait_until("the job to finish", Duration::from_secs(240), || {
+        last = status(url, id).unwrap_or(Value::Null);
+        matches!(last["state"].as_str(), Some("done" | "failed" | "cancelled"))
+    });
+    assert_eq!(last["state"], "done", "{last}");
+    last
+}
+
+fn image(url: &str, id: u64) -> Vec<u8> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let r = reqwest::get(format!("{url}/api/jobs/{id}/image.exr"))
+            .await
+            .unwrap();
+        assert!(r.status().is_success());
+        r.bytes().await.unwrap().to_vec()
+    })
+}
+
+#[test]
+fn two_workers_give_the_bytes_of_a_local_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "0.2"],
+    );
+    let _w1 = worker(&url, "w1", dir.path());
+    let _w2 = worker(&url, "w2", dir.path());
+    let id = submit(&url);
+    let s = wait_done(&url, id);
+    assert_eq!(s["iterations_done"], 40);
+    assert_eq!(s["checkpoint_iterations"], 40);
+    assert!(
+        image(&url, id) == local_render(dir.path()),
+        "farm and local bytes differ"
+    );
+}
+
+#[test]
+fn a_worker_killed_mid_batch_loses_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "2", "--lease-timeout", "1"],
+    );
+    let mut victim = worker(&url, "victim", dir.path());
+    let id = submit(&url);
+    // Its first batch is one pass (to measure it); kill it inside a later, larger one.
+    wait_until(
+        "the victim to hold a second batch",
+        Duration::from_secs(60),
+        || {
+            status(&url, id).is_some_and(|s| {
+                s["iterations_done"].as_u64().unwrap_or(0) >= 1
+                    && s["workers"] == serde_json::json!(["victim"])
+            })
+        },
+    );
+    victim.sigkill();
+    let done_at_kill = status(&url, id).unwrap()["iterations_done"].as_u64().unwrap();
+    assert!(done_at_kill < 40, "the victim finished before it could be killed");
+    let _rescuer = worker(&url, "rescuer", dir.path());
+    let s = wait_done(&url, id);
+    assert_eq!(s["iterations_done"], 40, "exactly the requested iterations: {s}");
+    assert!(
+        image(&url, id) == local_render(dir.path()),
+        "bytes differ after a worker was killed"
+    );
+}
+
+#[test]
+fn a_restarted_coordinator_resumes_the_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    // A fixed port, so the worker finds the coordinator again after the restart.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let bind = format!("127.0.0.1:{port}");
+    let flags = ["--batch-seconds", "0.3", "--lease-timeout", "2"];
+    let (mut coordinator, url) = serve(&data, &bind, &flags);
+    let _w = worker(&url, "w", dir.path());
+    let id = submit(&url);
+    wait_until("some passes to arrive", Duration::from_secs(60), || {
+        status(&url, id).is_some_and(|s| s["iterations_done"].as_u64().unwrap_or(0) >= 17)
+    });
+    let before = status(&url, id).unwrap()["iterations_done"].as_u64().unwrap();
+    coordinator.sigkill();
+    assert!(
+        before < 40,
+        "the job finished before the coordinator could be killed"
+    );
+    let (_coordinator, url2) = serve(&data, &bind, &flags);
+    assert_eq!(url, url2);
+    let after = status(&url, id).unwrap();
+    assert!(
+        after["iterations_done"].as_u64().unwrap() >= before,
+        "reported passes were lost: {after}"
+    );
+    let s = wait_done(&url, id);
+    assert_eq!(s["iterations_done"], 40, "{s}");
+    assert!(
+        image(&url, id) == local_render(dir.path()),
+        "bytes differ after a restart"
+    );
+}

@@ -1,0 +1,311 @@
+//! The worker's pull loop: lease a batch, make sure its scene is loaded (bundles are fetched
+//! once and cached, loaded scenes kept across batches), render it on a dedicated rayon pool
+//! while heartbeating, upload the sum, repeat.
+//!
+//! On shutdown (SIGTERM, ctrl-c) the batch under way is finished and uploaded, then the worker
+//! exits. A lost lease (expired, job cancelled) stops the batch at the next pass.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use photonfarm::film::FilmSum;
+use photonfarm::protocol::{Lease, LeaseRequest, Release, encode_batch};
+use photonfarm::render::render_batch;
+use photonfarm::scene::Scene;
+use tokio::sync::watch;
+
+/// Worker settings.
+#[derive(Clone, Debug)]
+pub struct WorkerConfig {
+    /// Coordinator URL.
+    pub coordinator: String,
+    /// Render threads.
+    pub threads: usize,
+    /// Bearer token.
+    pub token: Option<String>,
+    /// Name shown in job status.
+    pub name: String,
+    /// Bundle cache folder.
+    pub cache: PathBuf,
+}
+
+/// Scenes loaded from bundles, by (bundle, scene path, defines).
+type SceneCache = HashMap<(String, String, Vec<(String, String)>), Arc<Scene>>;
+
+struct Client {
+    base: String,
+    token: Option<String>,
+    http: reqwest::Client,
+}
+
+impl Client {
+    fn req(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
+        let r = self.http.request(method, format!("{}{path}", self.base));
+        match &self.token {
+            Some(t) => r.bearer_auth(t),
+            None => r,
+        }
+    }
+}
+
+/// Completes on ctrl-c or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+}
+
+/// Runs until `shutdown` completes (then finishes the batch under way) or a fatal error.
+pub async fn run(
+    config: WorkerConfig,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let (stop_tx, mut stop_rx) = watch::channel(false);
+    tokio::spawn(async move {
+        shutdown.await;
+        tracing::info!("shutting down after the batch under way");
+        let _ = stop_tx.send(true);
+    });
+    std::fs::create_dir_all(&config.cache)
+        .with_context(|| format!("cannot create {}", config.cache.display()))?;
+    let pool = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(config.threads)
+            .build()
+            .context("cannot start the render threads")?,
+    );
+    let client = Arc::new(Client {
+        base: config.coordinator.trim_end_matches('/').to_string(),
+        token: config.token.clone(),
+        http: reqwest::Client::builder()
+            .timeout(Duration::from_secs(300))
+            .build()?,
+    });
+    let mut scenes = SceneCache::new();
+    let mut backoff = Duration::from_millis(200);
+    tracing::info!(name = %config.name, threads = config.threads, coordinator = %client.base, "worker started");
+    while !*stop_rx.borrow() {
+        let lease = match request_lease(&client, &config).await {
+            Ok(Some(lease)) => {
+                backoff = Duration::from_millis(200);
+                lease
+            }
+            Ok(None) | Err(_) => {
+                // No work, or the coordinator is away (restarting): wait and ask again.
+                tokio::select! {
+                    _ = tokio::time::sleep(backoff) => {}
+                    _ = stop_rx.changed() => {}
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(2));
+                continue;
+            }
+        };
+        if let Err(e) = work_on(&client, &config, &pool, &mut scenes, lease.clone()).await {
+            tracing::error!(lease = lease.lease_id, "batch failed: {e:#}");
+            let release = Release {
+                error: Some(format!("{e:#}")),
+            };
+            let _ = client
+                .req(
+                    reqwest::Method::POST,
+                    &format!("/api/leases/{}/release", lease.lease_id),
+                )
+                .json(&release)
+                .send()
+                .await;
+        }
+    }
+    Ok(())
+}
+
+async fn request_lease(client: &Client, config: &WorkerConfig) -> anyhow::Result<Option<Lease>> {
+    let req = LeaseRequest {
+        worker: config.name.clone(),
+        threads: config.threads as u32,
+    };
+    let resp = client
+        .req(reqwest::Method::POST, "/api/lease")
+        .json(&req)
+        .send()
+        .await?;
+    match resp.status() {
+        reqwest::StatusCode::NO_CONTENT => Ok(None),
+        s if s.is_success() => Ok(Some(resp.json().await?)),
+        s => {
+            let text = resp.text().await.unwrap_or_default();
+            tracing::warn!("lease request refused: {s} {text}");
+            bail!("lease request refused: {s}")
+        }
+    }
+}
+
+/// Loads (or reuses) the lease's scene, renders the batch with heartbeats, uploads the result.
+async fn work_on(
+    client: &Arc<Client>,
+    config: &WorkerConfig,
+    pool: &Arc<rayon::ThreadPool>,
+    scenes: &mut SceneCache,
+    lease: Lease,
+) -> anyhow::Result<()> {
+    let scene = load_scene(client, config, scenes, &lease).await?;
+    if !lease.radii.is_empty() && lease.radii.len() as u64 != lease.end - lease.start {
+        bail!(
+            "the lease carries {} radii for {} passes",
+            lease.radii.len(),
+            lease.end - lease.start
+        );
+    }
+    let lost = Arc::new(AtomicBool::new(false));
+    let heartbeat = tokio::spawn(heartbeat_loop(
+        client.clone(),
+        lease.lease_id,
+        lease.heartbeat_ms,
+        lost.clone(),
+    ));
+    let (pool, lost_r, lease_r) = (pool.clone(), lost.clone(), lease.clone());
+    let sum = tokio::task::spawn_blocking(move || {
+        pool.install(|| {
+            // Pass by pass, so a lost lease stops the work early; the sum is the same bytes as
+            // one call over the whole range.
+            let mut sum = FilmSum::new(scene.width(), scene.height());
+            for (k, pass) in (lease_r.start..lease_r.end).enumerate() {
+                if lost_r.load(Ordering::Relaxed) {
+                    return None;
+                }
+                let radii = if lease_r.radii.is_empty() {
+                    &[][..]
+                } else {
+                    &lease_r.radii[k..k + 1]
+                };
+                let part = render_batch(&scene, &lease_r.settings, pass..pass + 1, radii);
+                sum.add(&part).expect("same scene, same size");
+            }
+            Some(sum)
+        })
+    })
+    .await
+    .context("the render thread failed")?;
+    heartbeat.abort();
+    let Some(sum) = sum else {
+        tracing::warn!(
+            lease = lease.lease_id,
+            "lease lost (expired or job cancelled); batch dropped"
+        );
+        return Ok(());
+    };
+    let resp = client
+        .req(
+            reqwest::Method::PUT,
+            &format!("/api/leases/{}/result", lease.lease_id),
+        )
+        .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
+        .body(encode_batch(&sum))
+        .send()
+        .await
+        .context("cannot upload the result")?;
+    match resp.status() {
+        s if s.is_success() => {
+            tracing::info!(
+                job = lease.job_id,
+                start = lease.start,
+                end = lease.end,
+                "batch delivered"
+            );
+        }
+        reqwest::StatusCode::CONFLICT | reqwest::StatusCode::GONE => {
+            tracing::warn!(
+                lease = lease.lease_id,
+                "result refused: the lease was reassigned or the job ended"
+            );
+        }
+        s => {
+            let text = resp.text().await.unwrap_or_default();
+            tracing::warn!(lease = lease.lease_id, "result refused: {s} {text}");
+        }
+    }
+    Ok(())
+}
+
+async fn heartbeat_loop(client: Arc<Client>, lease: u64, every_ms: u64, lost: Arc<AtomicBool>) {
+    let mut tick = tokio::time::interval(Duration::from_millis(every_ms.max(10)));
+    tick.tick().await;
+    loop {
+        tick.tick().await;
+        match client
+            .req(reqwest::Method::POST, &format!("/api/leases/{lease}/heartbeat"))
+            .send()
+            .await
+        {
+            Ok(r)
+                if r.status() == reqwest::StatusCode::CONFLICT || r.status() == reqwest::StatusCode::GONE =>
+            {
+                lost.store(true, Ordering::Relaxed);
+                return;
+            }
+            // A failed heartbeat is retried at the next tick; the lease only expires after
+            // several are missed.
+            _ => {}
+        }
+    }
+}
+
+async fn load_scene(
+    client: &Client,
+    config: &WorkerConfig,
+    scenes: &mut SceneCache,
+    lease: &Lease,
+) -> anyhow::Result<Arc<Scene>> {
+    let key = (lease.bundle.clone(), lease.scene.clone(), lease.defines.clone());
+    if let Some(s) = scenes.get(&key) {
+        return Ok(s.clone());
+    }
+    if lease.bundle.len() != 64 || !lease.bundle.chars().all(|c| c.is_ascii_hexdigit()) {
+        bail!("malformed bundle id \"{}\"", lease.bundle);
+    }
+    let dir = config.cache.join(&lease.bundle);
+    if !dir.exists() {
+        let bytes = client
+            .req(reqwest::Method::GET, &format!("/api/bundles/{}", lease.bundle))
+            .send()
+            .await?
+            .error_for_status()?
+            .bytes()
+            .await?;
+        if photonfarm::bundle::content_hash(&bytes) != lease.bundle {
+            bail!("bundle {} arrived damaged (hash mismatch)", lease.bundle);
+        }
+        let tmp = config
+            .cache
+            .join(format!("{}.partial-{}", lease.bundle, std::process::id()));
+        let _ = std::fs::remove_dir_all(&tmp);
+        photonfarm::bundle::unpack(&bytes, &tmp)?;
+        std::fs::rename(&tmp, &dir).or_else(|e| if dir.exists() { Ok(()) } else { Err(e) })?;
+    }
+    let path = dir.join(&lease.scene);
+    let defines = lease.defines.clone();
+    let scene = tokio::task::spawn_blocking(move || Scene::load(&path, &defines)).await??;
+    let scene = Arc::new(scene);
+    scenes.insert(key, scene.clone());
+    Ok(scene)
+}
