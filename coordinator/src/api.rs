@@ -347,12 +347,13 @@ async fn result(
     // Refuse a dead lease before reading a large body.
     with_farm(&state, |f| f.expected_result(id))?;
     let body = body_bytes(req, &state).await?;
+    let len = body.len() as u64;
     let sum = blocking(move || {
         decode_batch(&body).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e.to_string()))
     })
     .await?;
     let st = state.clone();
-    blocking(move || with_farm(&st, |f| f.complete(id, sum))).await?;
+    blocking(move || with_farm(&st, |f| f.complete(id, sum, len))).await?;
     Ok(Json(json!({ "accepted": true })).into_response())
 }
 

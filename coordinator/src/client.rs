@@ -107,7 +107,7 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let client = ApiClient::new(&args.to, args.token.clone());
+    let client = ApiClient::new(&args.to, args.token.clone().filter(|t| !t.is_empty()));
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let job = client.submit(bundle, &scene_name, &settings).await?;

@@ -81,6 +81,10 @@ pub struct JobStatus {
     pub message: Option<String>,
     /// When the job was submitted, Unix milliseconds.
     pub created_unix_ms: u64,
+    /// Batch results received since this coordinator started.
+    pub batches_received: u64,
+    /// Bytes of batch results received since this coordinator started.
+    pub bytes_received: u64,
 }
 
 struct JobEntry {
@@ -99,6 +103,8 @@ struct JobEntry {
     finished: Option<Instant>,
     /// Passes already done when this process started (for an honest rate after a restart).
     done_at_start: u64,
+    batches_received: u64,
+    bytes_received: u64,
 }
 
 /// The coordinator's state.
@@ -171,6 +177,8 @@ impl Farm {
                     started: None,
                     finished: None,
                     done_at_start,
+                    batches_received: 0,
+                    bytes_received: 0,
                 },
             );
         }
@@ -244,6 +252,8 @@ impl Farm {
                 started: None,
                 finished: None,
                 done_at_start: 0,
+                batches_received: 0,
+                bytes_received: 0,
             },
         );
         Ok(id)
@@ -299,8 +309,9 @@ impl Farm {
         Ok((job.width, job.height, g.end - g.start))
     }
 
-    /// Accepts a batch result: stored durably, counted once, merged in pass order.
-    pub fn complete(&mut self, lease_id: u64, sum: FilmSum) -> Result<(), FarmError> {
+    /// Accepts a batch result (`bytes` long on the wire): stored durably, counted once, merged
+    /// in pass order.
+    pub fn complete(&mut self, lease_id: u64, sum: FilmSum, bytes: u64) -> Result<(), FarmError> {
         let now = self.now();
         let g = self.scheduler.lease_range(lease_id, now)?;
         let (w, h) = {
@@ -321,6 +332,8 @@ impl Farm {
         self.store.save_batch(g.job_id, g.start, &sum)?;
         self.scheduler.complete(lease_id, now)?;
         let job = self.jobs.get_mut(&g.job_id).expect("known");
+        job.batches_received += 1;
+        job.bytes_received += bytes;
         let (checkpoints, _) = job
             .acc
             .add(g.start, sum)
@@ -417,6 +430,8 @@ impl Farm {
             height: job.height,
             message,
             created_unix_ms: job.created_ms,
+            batches_received: job.batches_received,
+            bytes_received: job.bytes_received,
         })
     }
 

@@ -18,13 +18,15 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     if args.max_upload_mb == 0 || args.checkpoint_every == 0 {
         bail!("--max-upload-mb and --checkpoint-every must be at least 1");
     }
-    if args.token.as_deref() == Some("") {
-        bail!("--token must not be empty");
-    }
     crate::logging::init();
+    // An empty PHOTONFARM_TOKEN (as docker compose passes an unset variable) means no token.
+    let token = args.token.clone().filter(|t| !t.is_empty());
+    if token.is_none() {
+        tracing::warn!("no token configured: anyone who can reach this address can use the service");
+    }
     let config = ServeConfig {
         data: args.data.clone(),
-        token: args.token.clone(),
+        token,
         max_upload: args.max_upload_mb << 20,
         farm: FarmConfig {
             scheduler: SchedulerConfig {

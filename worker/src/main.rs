@@ -45,7 +45,7 @@ fn main() -> ExitCode {
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
-        token: args.token,
+        token: args.token.filter(|t| !t.is_empty()),
         cache: args
             .cache
             .unwrap_or_else(|| std::env::temp_dir().join(format!("photonfarm-worker-{name}"))),

@@ -1,0 +1,122 @@
+//! Farm scaling on loopback: `cargo build --release -p worker && cargo bench -p coordinator --bench farm`.
+//!
+//! Renders the same SPPM job (cbox-spheres, 256×256, 200,000 photons per iteration) once with
+//! one worker of one thread and once with two such workers, through a real coordinator process
+//! and real worker processes, and prints iterations per second of each, their ratio, and the
+//! bytes sent per iteration. Rates are taken from the job's own status (iterations over the time
+//! from the first lease to the last result).
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+const ITERATIONS: &str = "96";
+
+fn run(workers: usize, dir: &Path) -> serde_json::Value {
+    let coordinator = PathBuf::from(env!("CARGO_BIN_EXE_coordinator"));
+    let worker = coordinator.with_file_name("worker");
+    assert!(
+        worker.exists(),
+        "build the worker first: cargo build --release -p worker"
+    );
+    let data = dir.join(format!("data-{workers}"));
+    let mut child = Command::new(&coordinator)
+        .args(["serve", "--bind", "127.0.0.1:0", "--batch-seconds", "2", "--data"])
+        .arg(&data)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let _serve = Proc(child);
+    let url = line.trim().strip_prefix("listening on ").unwrap().to_string();
+    let _workers: Vec<Proc> = (0..workers)
+        .map(|i| {
+            Proc(
+                Command::new(&worker)
+                    .args([
+                        "--coordinator",
+                        &url,
+                        "--threads",
+                        "1",
+                        "--name",
+                        &format!("w{i}"),
+                        "--cache",
+                    ])
+                    .arg(dir.join(format!("cache-{workers}-{i}")))
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .unwrap(),
+            )
+        })
+        .collect();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml");
+    let out = Command::new(&coordinator)
+        .args([
+            "submit",
+            "--to",
+            &url,
+            scene.to_str().unwrap(),
+            "--integrator",
+            "sppm",
+        ])
+        .args([
+            "--iterations",
+            ITERATIONS,
+            "--photons",
+            "200000",
+            "--checkpoint-every",
+            "96",
+            "--wait",
+        ])
+        .stderr(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let id = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let s: serde_json::Value = reqwest::get(format!("{url}/api/jobs/{id}"))
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        s
+    })
+}
+
+fn main() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = run(1, dir.path());
+    let two = run(2, dir.path());
+    let rate = |s: &serde_json::Value| s["rate"].as_f64().unwrap();
+    for (n, s) in [(1, &one), (2, &two)] {
+        println!(
+            "{n} worker(s) x 1 thread: {:.2} iterations/s ({} iterations in {:.1} s, {} batches, {:.0} bytes per iteration)",
+            rate(s),
+            s["iterations_done"],
+            s["elapsed_seconds"].as_f64().unwrap(),
+            s["batches_received"],
+            s["bytes_received"].as_f64().unwrap() / s["iterations_done"].as_f64().unwrap()
+        );
+    }
+    println!("scaling, 2 workers over 1: {:.2}x", rate(&two) / rate(&one));
+}
