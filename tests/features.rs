@@ -10,7 +10,7 @@
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
 
-use photonfarm_tests::{compare, load, reference, refs_dir, render_path};
+use photonfarm_tests::{check_path_against_mitsuba, refs_dir};
 
 fn check(name: &str) {
     let meta: serde_json::Value =
@@ -18,26 +18,12 @@ fn check(name: &str) {
             .unwrap();
     let mitsuba = meta["mitsuba_mse_at_test_spp"]["median"].as_f64().unwrap();
     let spp = meta["mitsuba_mse_at_test_spp"]["spp"].as_u64().unwrap();
-    let scene = load(&refs_dir().join(format!("{name}.xml")), &[("res", "128")]);
-    let film = render_path(&scene, spp, 1);
-    let cmp = compare(&film.image().unwrap(), &reference(&format!("{name}.exr")));
-    eprintln!(
-        "{name}: mse {:.3e} (Mitsuba {mitsuba:.3e}, ratio {:.3}), means {:?} vs {:?}, worst mean error {:.3}%",
-        cmp.mse,
-        cmp.mse / mitsuba,
-        cmp.mean,
-        cmp.reference_mean,
-        100.0 * cmp.worst_mean_error()
-    );
-    assert_eq!(film.nonfinite, 0);
-    assert!(
-        cmp.worst_mean_error() < 0.01,
-        "{name}: a channel mean is off by more than 1%: {cmp:?}"
-    );
-    assert!(
-        cmp.mse <= 1.25 * mitsuba,
-        "{name}: MSE {:.3e} exceeds 1.25 x Mitsuba's {mitsuba:.3e}",
-        cmp.mse
+    check_path_against_mitsuba(
+        &format!("{name}.xml"),
+        &format!("{name}.exr"),
+        "128",
+        spp,
+        mitsuba,
     );
 }
 

@@ -105,3 +105,30 @@ pub fn reference(name: &str) -> Vec<Rgb> {
     let (_, _, px) = read_image(&refs_dir().join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
     px
 }
+
+/// Renders `scene` (in `refs/`) with the path tracer at `spp` and checks it against the Mitsuba
+/// reference `exr`: every channel mean within 1%, and an MSE no worse than 1.25 times
+/// `mitsuba_mse` (Mitsuba's own MSE at the same spp).
+pub fn check_path_against_mitsuba(scene: &str, exr: &str, res: &str, spp: u64, mitsuba_mse: f64) {
+    let loaded = load(&refs_dir().join(scene), &[("res", res)]);
+    let film = render_path(&loaded, spp, 1);
+    let cmp = compare(&film.image().unwrap(), &reference(exr));
+    eprintln!(
+        "{exr}: mse {:.3e} (Mitsuba {mitsuba_mse:.3e}, ratio {:.3}), means {:?} vs {:?}, worst mean error {:.3}%",
+        cmp.mse,
+        cmp.mse / mitsuba_mse,
+        cmp.mean,
+        cmp.reference_mean,
+        100.0 * cmp.worst_mean_error()
+    );
+    assert_eq!(film.nonfinite, 0);
+    assert!(
+        cmp.worst_mean_error() < 0.01,
+        "{exr}: a channel mean is off by more than 1%: {cmp:?}"
+    );
+    assert!(
+        cmp.mse <= 1.25 * mitsuba_mse,
+        "{exr}: MSE {:.3e} exceeds 1.25 x Mitsuba's {mitsuba_mse:.3e}",
+        cmp.mse
+    );
+}

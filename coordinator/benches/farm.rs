@@ -6,64 +6,22 @@
 //! bytes sent per iteration. Rates are taken from the job's own status (iterations over the time
 //! from the first lease to the last result).
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::time::Duration;
+#[path = "../tests/support/mod.rs"]
+mod support;
 
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+use std::path::Path;
+use std::process::{Command, Stdio};
 
 const ITERATIONS: &str = "96";
 
 fn run(workers: usize, dir: &Path) -> serde_json::Value {
-    let coordinator = PathBuf::from(env!("CARGO_BIN_EXE_coordinator"));
-    let worker = coordinator.with_file_name("worker");
-    assert!(
-        worker.exists(),
-        "build the worker first: cargo build --release -p worker"
-    );
+    let coordinator = support::coordinator_bin();
     let data = dir.join(format!("data-{workers}"));
-    let mut child = Command::new(&coordinator)
-        .args(["serve", "--bind", "127.0.0.1:0", "--batch-seconds", "2", "--data"])
-        .arg(&data)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let _serve = Proc(child);
-    let url = line.trim().strip_prefix("listening on ").unwrap().to_string();
-    let _workers: Vec<Proc> = (0..workers)
-        .map(|i| {
-            Proc(
-                Command::new(&worker)
-                    .args([
-                        "--coordinator",
-                        &url,
-                        "--threads",
-                        "1",
-                        "--name",
-                        &format!("w{i}"),
-                        "--cache",
-                    ])
-                    .arg(dir.join(format!("cache-{workers}-{i}")))
-                    .stderr(Stdio::null())
-                    .spawn()
-                    .unwrap(),
-            )
-        })
+    let (_serve, url) = support::serve(&data, "127.0.0.1:0", &["--batch-seconds", "2"], &[]);
+    let _workers: Vec<support::Proc> = (0..workers)
+        .map(|i| support::worker(&url, &format!("w{i}"), &dir.join(format!("cache-{workers}"))))
         .collect();
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml");
+    let scene = support::cbox_spheres();
     let out = Command::new(&coordinator)
         .args([
             "submit",
@@ -98,7 +56,6 @@ fn run(workers: usize, dir: &Path) -> serde_json::Value {
             .json()
             .await
             .unwrap();
-        tokio::time::sleep(Duration::from_millis(10)).await;
         s
     })
 }

@@ -1,48 +1,22 @@
 //! Bad input against a running coordinator: each request gets the right 4xx with a JSON error,
 //! and the service keeps serving.
 
-use std::io::{BufRead, BufReader};
+mod support;
+
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 
 use reqwest::StatusCode;
 use reqwest::multipart::{Form, Part};
 use serde_json::Value;
 
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 const TOKEN: &str = "s3cret-token";
 
-fn serve(data: &Path) -> (Proc, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_coordinator"))
-        .args([
-            "serve",
-            "--bind",
-            "127.0.0.1:0",
-            "--data",
-            data.to_str().unwrap(),
-            "--max-upload-mb",
-            "1",
-        ])
-        .env("PHOTONFARM_TOKEN", TOKEN)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    (
-        Proc(child),
-        line.trim().strip_prefix("listening on ").unwrap().to_string(),
+fn serve(data: &Path) -> (support::Proc, String) {
+    support::serve(
+        data,
+        "127.0.0.1:0",
+        &["--max-upload-mb", "1"],
+        &[("PHOTONFARM_TOKEN", TOKEN)],
     )
 }
 

@@ -2,79 +2,17 @@
 //! 127.0.0.1, real HTTP, a real SQLite database and files. Each test checks the farm's image
 //! bytes against `coordinator render` with the same settings.
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+mod support;
+
+use std::path::Path;
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
+use support::{cbox_spheres as scene, coordinator_bin, worker};
 
-/// A child process killed when the test ends, whatever happens.
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-impl Proc {
-    fn sigkill(&mut self) {
-        self.0.kill().unwrap();
-        self.0.wait().unwrap();
-    }
-}
-
-fn coordinator_bin() -> PathBuf {
-    PathBuf::from(env!("CARGO_BIN_EXE_coordinator"))
-}
-
-fn worker_bin() -> PathBuf {
-    let p = coordinator_bin().with_file_name("worker");
-    assert!(
-        p.exists(),
-        "{} is missing: run `cargo test --workspace` (or build the worker)",
-        p.display()
-    );
-    p
-}
-
-fn scene() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml")
-}
-
-/// Starts `coordinator serve`; returns it and its URL.
-fn serve(data: &Path, bind: &str, extra: &[&str]) -> (Proc, String) {
-    let mut child = Command::new(coordinator_bin())
-        .args(["serve", "--bind", bind, "--data", data.to_str().unwrap()])
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let url = line
-        .trim()
-        .strip_prefix("listening on ")
-        .expect("the service announces its address")
-        .to_string();
-    (Proc(child), url)
-}
-
-fn worker(url: &str, name: &str, cache: &Path) -> Proc {
-    Proc(
-        Command::new(worker_bin())
-            .args(["--coordinator", url, "--threads", "1", "--name", name, "--cache"])
-            .arg(cache.join(name))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    )
+fn serve(data: &Path, bind: &str, extra: &[&str]) -> (support::Proc, String) {
+    support::serve(data, bind, extra, &[])
 }
 
 /// The job of these tests: SPPM on cbox-spheres, small enough for CI.

@@ -1,6 +1,7 @@
 //! Light transport algorithms. Each computes the radiance of one camera path; the render loop
 //! in [`crate::render`] decides which pixels and passes.
 
+pub mod direct;
 pub mod path;
 pub mod sppm;
 

@@ -2,13 +2,10 @@
 //! following Mitsuba 3's `path` integrator so that both converge to the same image with
 //! similar noise: same depth meaning, same Russian roulette.
 
-use glam::Vec3A;
-
-use super::mis_weight;
+use super::direct::{self, PreviousBounce};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::geometry::{Frame, Ray, SurfacePoint};
-use crate::light::Light;
+use crate::geometry::{Frame, Ray};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 
@@ -32,13 +29,6 @@ impl PathSettings {
     }
 }
 
-/// Where the previous bounce came from: needed to weight emission found by BSDF sampling.
-struct PreviousBounce {
-    p: Vec3A,
-    pdf: f32,
-    delta: bool,
-}
-
 /// Radiance arriving along `ray`.
 pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &mut Sampler) -> Rgb {
     let max_depth = settings.max_depth.unwrap_or(u32::MAX);
@@ -54,7 +44,7 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
 
         // Emission found by the camera ray or by BSDF sampling.
         if let Some(li) = shape.light {
-            l += beta * emitted_with_mis(scene, li, &sp, wo, prev.as_ref());
+            l += beta * direct::emitted(scene, li, &sp, wo, prev.as_ref());
         }
         if depth + 1 >= max_depth {
             break;
@@ -67,18 +57,8 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
         // Next-event estimation: a light sample, weighted against BSDF sampling.
         let u_light = sampler.next_1d();
         let u_light2 = sampler.next_2d();
-        if bsdf.has_smooth()
-            && let Some((_, ls)) = scene.sample_light(sp.p, u_light, u_light2)
-        {
-            let f = bsdf.eval(wi_local, frame.to_local(ls.wi));
-            if f != Rgb::ZERO && scene.unoccluded(&sp, &ls) {
-                let w = if ls.delta {
-                    1.0
-                } else {
-                    mis_weight(ls.pdf, bsdf.pdf(wi_local, frame.to_local(ls.wi)))
-                };
-                l += beta * f * ls.radiance * (w / ls.pdf);
-            }
+        if bsdf.has_smooth() {
+            l += beta * direct::light_sample(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, true);
         }
 
         // BSDF sampling for the next bounce.
@@ -111,26 +91,4 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
         }
     }
     l
-}
-
-/// Emitted radiance towards `wo`, MIS-weighted against light sampling at the previous bounce.
-fn emitted_with_mis(
-    scene: &Scene,
-    light: u32,
-    sp: &SurfacePoint,
-    wo: Vec3A,
-    prev: Option<&PreviousBounce>,
-) -> Rgb {
-    let Light::Area(area) = &scene.lights[light as usize] else {
-        return Rgb::ZERO;
-    };
-    let le = area.emitted(sp.ns, wo);
-    if le == Rgb::ZERO {
-        return le;
-    }
-    match prev {
-        None => le,
-        Some(p) if p.delta => le,
-        Some(p) => le * mis_weight(p.pdf, scene.light_pdf(light, p.p, sp)),
-    }
 }

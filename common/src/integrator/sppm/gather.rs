@@ -8,14 +8,13 @@
 
 use std::f32::consts::PI;
 
-use glam::{Vec2, Vec3A};
+use glam::Vec3A;
 
 use super::photon_map::PhotonMap;
 use crate::bsdf::{Bsdf, TransportMode};
 use crate::color::Rgb;
 use crate::geometry::{Frame, Ray, SurfacePoint};
-use crate::integrator::mis_weight;
-use crate::light::Light;
+use crate::integrator::direct::{self, PreviousBounce};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 
@@ -37,13 +36,6 @@ pub struct GatherContext<'a> {
     pub rr_depth: u32,
 }
 
-/// The previous bounce of a camera path, for weighting emission found by BSDF sampling.
-struct PreviousBounce {
-    p: Vec3A,
-    pdf: f32,
-    delta: bool,
-}
-
 /// Radiance along the camera ray of one pixel sample.
 pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> Rgb {
     let scene = ctx.scene;
@@ -59,15 +51,8 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
         let shape = &scene.shapes[sp.shape as usize];
         // Emitters seen directly, through specular bounces (full weight: light sampling cannot
         // find these paths) or through glossy ones (weighted against light sampling).
-        if let Some(li) = shape.light
-            && let Light::Area(area) = &scene.lights[li as usize]
-        {
-            let le = area.emitted(sp.ns, wo);
-            let w = match &prev {
-                Some(p) if !p.delta => mis_weight(p.pdf, scene.light_pdf(li, p.p, &sp)),
-                _ => 1.0,
-            };
-            l += beta * le * w;
+        if let Some(li) = shape.light {
+            l += beta * direct::emitted(scene, li, &sp, wo, prev.as_ref());
         }
         if depth + 1 >= ctx.max_depth {
             break;
@@ -79,10 +64,10 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
         let u_light2 = sampler.next_2d();
         let gather = bsdf.gathers_photons();
         if gather {
-            l += beta * direct_light(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, false);
+            l += beta * direct::light_sample(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, false);
             l += beta * photon_estimate(ctx, bsdf, &sp, &frame, wo, wi_local);
         } else if bsdf.has_smooth() {
-            l += beta * direct_light(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, true);
+            l += beta * direct::light_sample(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, true);
         }
         // Continue through specular lobes, and through glossy ones where nothing was gathered.
         let u1 = sampler.next_1d();
@@ -110,35 +95,6 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
         }
     }
     l
-}
-
-/// Light arriving straight from a light source, by light sampling; weighted against BSDF
-/// sampling where the path goes on to sample the BSDF.
-#[allow(clippy::too_many_arguments)]
-fn direct_light(
-    scene: &Scene,
-    bsdf: &Bsdf,
-    sp: &SurfacePoint,
-    frame: &Frame,
-    wi_local: Vec3A,
-    u_select: f32,
-    u: Vec2,
-    with_mis: bool,
-) -> Rgb {
-    let Some((_, ls)) = scene.sample_light(sp.p, u_select, u) else {
-        return Rgb::ZERO;
-    };
-    let wl = frame.to_local(ls.wi);
-    let f = bsdf.eval(wi_local, wl);
-    if f == Rgb::ZERO || !scene.unoccluded(sp, &ls) {
-        return Rgb::ZERO;
-    }
-    let w = if with_mis && !ls.delta {
-        mis_weight(ls.pdf, bsdf.pdf(wi_local, wl))
-    } else {
-        1.0
-    };
-    f * ls.radiance * (w / ls.pdf)
 }
 
 /// The density estimate: Σ f · Φ · w / (normalisation · π r²), with the cone filter w.

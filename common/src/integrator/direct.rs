@@ -1,0 +1,74 @@
+//! Light arriving straight from the light sources, shared by the path tracer and SPPM's camera
+//! pass: light sampling at a surface, and emission found by BSDF sampling, each weighted against
+//! the other by multiple importance sampling.
+
+use glam::{Vec2, Vec3A};
+
+use super::mis_weight;
+use crate::bsdf::Bsdf;
+use crate::color::Rgb;
+use crate::geometry::{Frame, SurfacePoint};
+use crate::light::Light;
+use crate::scene::Scene;
+
+/// Where a path's previous bounce was and how it was sampled.
+pub struct PreviousBounce {
+    /// Position.
+    pub p: Vec3A,
+    /// Density of the sampled direction (solid angle).
+    pub pdf: f32,
+    /// Whether it came from a delta lobe (then light sampling could not have found the path).
+    pub delta: bool,
+}
+
+/// Radiance emitted by `light` at `sp` towards `wo`, weighted against light sampling at the
+/// previous bounce (full weight for camera rays and after specular bounces).
+pub fn emitted(
+    scene: &Scene,
+    light: u32,
+    sp: &SurfacePoint,
+    wo: Vec3A,
+    prev: Option<&PreviousBounce>,
+) -> Rgb {
+    let Light::Area(area) = &scene.lights[light as usize] else {
+        return Rgb::ZERO;
+    };
+    let le = area.emitted(sp.ns, wo);
+    if le == Rgb::ZERO {
+        return le;
+    }
+    match prev {
+        Some(p) if !p.delta => le * mis_weight(p.pdf, scene.light_pdf(light, p.p, sp)),
+        _ => le,
+    }
+}
+
+/// One light sample's contribution at `sp` (seen from local direction `wi_local`), weighted
+/// against BSDF sampling when `with_mis` (the path goes on to sample the BSDF) and in full
+/// otherwise.
+#[allow(clippy::too_many_arguments)]
+pub fn light_sample(
+    scene: &Scene,
+    bsdf: &Bsdf,
+    sp: &SurfacePoint,
+    frame: &Frame,
+    wi_local: Vec3A,
+    u_select: f32,
+    u: Vec2,
+    with_mis: bool,
+) -> Rgb {
+    let Some((_, ls)) = scene.sample_light(sp.p, u_select, u) else {
+        return Rgb::ZERO;
+    };
+    let wl = frame.to_local(ls.wi);
+    let f = bsdf.eval(wi_local, wl);
+    if f == Rgb::ZERO || !scene.unoccluded(sp, &ls) {
+        return Rgb::ZERO;
+    }
+    let w = if with_mis && !ls.delta {
+        mis_weight(ls.pdf, bsdf.pdf(wi_local, wl))
+    } else {
+        1.0
+    };
+    f * ls.radiance * (w / ls.pdf)
+}

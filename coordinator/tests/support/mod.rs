@@ -1,0 +1,80 @@
+//! Starting the real programs for the farm's tests and benchmark.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+/// A child process killed when dropped, whatever happens to the test.
+pub struct Proc(pub Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Proc {
+    /// Kills the process with SIGKILL and waits for it.
+    pub fn sigkill(&mut self) {
+        self.0.kill().unwrap();
+        self.0.wait().unwrap();
+    }
+}
+
+/// The coordinator binary.
+pub fn coordinator_bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_coordinator"))
+}
+
+/// The worker binary, built beside the coordinator by `cargo test --workspace`.
+pub fn worker_bin() -> PathBuf {
+    let p = coordinator_bin().with_file_name("worker");
+    assert!(
+        p.exists(),
+        "{} is missing: run `cargo test --workspace` (or build the worker)",
+        p.display()
+    );
+    p
+}
+
+/// The shared Cornell box with spheres.
+pub fn cbox_spheres() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml")
+}
+
+/// Starts `coordinator serve` with extra flags and environment; returns it and its URL.
+pub fn serve(data: &Path, bind: &str, extra: &[&str], env: &[(&str, &str)]) -> (Proc, String) {
+    let mut child = Command::new(coordinator_bin())
+        .args(["serve", "--bind", bind, "--data", data.to_str().unwrap()])
+        .args(extra)
+        .envs(env.iter().copied())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .trim()
+        .strip_prefix("listening on ")
+        .expect("the service announces its address")
+        .to_string();
+    (Proc(child), url)
+}
+
+/// Starts a one-thread worker named `name`, caching bundles under `cache`.
+pub fn worker(url: &str, name: &str, cache: &Path) -> Proc {
+    Proc(
+        Command::new(worker_bin())
+            .args(["--coordinator", url, "--threads", "1", "--name", name, "--cache"])
+            .arg(cache.join(name))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    )
+}
