@@ -89,7 +89,7 @@ fn lit_sphere_has_radiance_one() {
 fn split_and_merge_is_bit_exact() {
     let scene = load(&refs_dir().join("cbox-spheres.xml"), &[("res", "40")]);
     let settings = sppm_settings(&scene, 5_000);
-    let radii = settings.schedule().radii(0..16);
+    let radii = settings.radii(0..16);
     let render = |threads: usize, range: std::ops::Range<u64>| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -113,7 +113,7 @@ fn split_and_merge_is_bit_exact() {
     assert_eq!(whole, render_passes(&scene, &via_settings, 0..16));
     // A different radius for one iteration changes the result: radii are really used.
     let mut other = radii.clone();
-    other[5] *= 2.0;
+    other[5][0] *= 2.0;
     assert_ne!(whole, render_sppm_iterations(&scene, 7, &settings, 0..16, &other));
 }
 

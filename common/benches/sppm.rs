@@ -33,22 +33,24 @@ fn main() {
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let pixels = (scene.width() * scene.height()) as f64;
 
-    let mut photons = Vec::new();
+    let mut buffers = sppm::PhotonBuffers::default();
     let mut trace = Vec::new();
     for run in 0..RUNS as u64 {
         let t = Instant::now();
-        one.install(|| sppm::trace_photons(&scene, 0, run, PHOTONS, u32::MAX, &mut photons));
+        one.install(|| sppm::trace_photons(&scene, 0, run, PHOTONS, u32::MAX, &mut buffers));
         trace.push(PHOTONS as f64 / t.elapsed().as_secs_f64());
     }
     println!(
         "photon pass: {:.2} M photons/s/core ({} emitted, {} stored, {} bytes each)",
         median(trace) / 1e6,
         PHOTONS,
-        photons.len(),
+        buffers.surface.len(),
         std::mem::size_of::<sppm::Photon>()
     );
 
+    let photons = buffers.surface;
     let mut map = PhotonMap::new();
+    let volume_map = PhotonMap::new();
     let (mut grid_build, mut kd_build) = (Vec::new(), Vec::new());
     let points: Vec<[f32; 3]> = photons.iter().map(|p| p.p).collect();
     let mut tree = None;
@@ -114,6 +116,8 @@ fn main() {
             scene: &scene,
             map: &map,
             radius,
+            volume_map: &volume_map,
+            volume_radius: radius,
             power_unit: sppm::power_unit(&scene, PHOTONS),
             k: settings.k,
             max_depth: u32::MAX,

@@ -44,6 +44,9 @@ pub struct JobSettings {
     /// SPPM cone filter k.
     #[serde(default)]
     pub k: Option<f32>,
+    /// SPPM initial volume radius over the initial surface radius.
+    #[serde(default)]
+    pub volume_radius_ratio: Option<f32>,
     /// `-D name=value` scene parameters.
     #[serde(default)]
     pub defines: Vec<(String, String)>,
@@ -98,6 +101,7 @@ impl JobSettings {
                     ("radius", self.radius.is_some()),
                     ("alpha", self.alpha.is_some()),
                     ("k", self.k.is_some()),
+                    ("volume_radius_ratio", self.volume_radius_ratio.is_some()),
                 ] {
                     if given {
                         return Err(JobError::NotForPath(name));
@@ -112,6 +116,7 @@ impl JobSettings {
                 s.initial_radius = self.radius.unwrap_or(s.initial_radius);
                 s.alpha = self.alpha.unwrap_or(s.alpha);
                 s.k = self.k.unwrap_or(s.k);
+                s.volume_radius_ratio = self.volume_radius_ratio.unwrap_or(s.volume_radius_ratio);
                 s.validate()?;
                 let declared = scene
                     .integrator

@@ -13,6 +13,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod job;
 pub mod light;
+pub mod medium;
 pub mod protocol;
 pub mod render;
 pub mod sampling;

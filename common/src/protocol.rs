@@ -30,9 +30,10 @@ pub struct Lease {
     pub start: u64,
     /// One past the last pass.
     pub end: u64,
-    /// SPPM: the radius of each pass of the batch, from the coordinator's schedule, so every
-    /// machine uses the same radii whatever its maths library. Empty for path tracing.
-    pub radii: Vec<f32>,
+    /// SPPM: the (surface, volume) radii of each pass of the batch, from the coordinator's
+    /// schedule, so every machine uses the same radii whatever its maths library. Empty for
+    /// path tracing.
+    pub radii: Vec<[f32; 2]>,
     /// What to render.
     pub settings: RenderSettings,
     /// Content hash of the job's bundle (scene and files), to fetch it once and cache it.

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::color::Rgb;
 use crate::film::{FilmSum, to_fixed};
 use crate::integrator::path::{self, PathSettings};
-use crate::integrator::sppm::{self, GatherContext, PhotonMap, SppmSettings};
+use crate::integrator::sppm::{self, GatherContext, PhotonBuffers, PhotonMap, SppmSettings};
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -52,28 +52,34 @@ pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64
             film
         }
         Method::Sppm(s) => {
-            let radii = s.schedule().radii(passes.clone());
+            let radii = s.radii(passes.clone());
             render_sppm_iterations(scene, settings.seed, s, passes, &radii)
         }
     }
 }
 
 /// Renders passes `passes` of a batch: the farm's unit of work. For SPPM, `radii` holds the
-/// radius of each pass (from the coordinator); for path tracing it is ignored.
-pub fn render_batch(scene: &Scene, settings: &RenderSettings, passes: Range<u64>, radii: &[f32]) -> FilmSum {
+/// (surface, volume) radii of each pass (from the coordinator); for path tracing it is ignored.
+pub fn render_batch(
+    scene: &Scene,
+    settings: &RenderSettings,
+    passes: Range<u64>,
+    radii: &[[f32; 2]],
+) -> FilmSum {
     match &settings.method {
         Method::Path(_) => render_passes(scene, settings, passes),
         Method::Sppm(s) => render_sppm_iterations(scene, settings.seed, s, passes, radii),
     }
 }
 
-/// Renders SPPM iterations `iterations` with the given radii (one per iteration).
+/// Renders SPPM iterations `iterations` with the given (surface, volume) radii, one pair per
+/// iteration.
 pub fn render_sppm_iterations(
     scene: &Scene,
     seed: u64,
     settings: &SppmSettings,
     iterations: Range<u64>,
-    radii: &[f32],
+    radii: &[[f32; 2]],
 ) -> FilmSum {
     assert_eq!(
         radii.len() as u64,
@@ -83,15 +89,19 @@ pub fn render_sppm_iterations(
     let mut film = FilmSum::new(scene.width(), scene.height());
     let max_depth = settings.max_depth.unwrap_or(u32::MAX);
     // Reused across iterations: memory depends on the photon count, not on the iterations.
-    let mut photons = Vec::new();
+    let mut photons = PhotonBuffers::default();
     let mut map = PhotonMap::new();
-    for (iteration, &radius) in iterations.zip(radii) {
+    let mut volume_map = PhotonMap::new();
+    for (iteration, &[radius, volume_radius]) in iterations.zip(radii) {
         sppm::trace_photons(scene, seed, iteration, settings.photons, max_depth, &mut photons);
-        map.build(&photons, radius);
+        map.build(&photons.surface, radius);
+        volume_map.build(&photons.volume, volume_radius);
         let ctx = GatherContext {
             scene,
             map: &map,
             radius,
+            volume_map: &volume_map,
+            volume_radius,
             power_unit: sppm::power_unit(scene, settings.photons),
             k: settings.k,
             max_depth,

@@ -67,6 +67,10 @@ pub struct JobArgs {
     /// [default: 1.1].
     #[arg(long, allow_negative_numbers = true)]
     pub k: Option<f32>,
+    /// SPPM: initial volume radius over the initial surface radius [default: the scene's
+    /// volume_radius_ratio, else 2].
+    #[arg(long, allow_negative_numbers = true)]
+    pub volume_radius_ratio: Option<f32>,
     /// Seed of every random number: the same seed gives the same image bytes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -102,6 +106,7 @@ impl JobArgs {
                 ("--radius", self.radius.is_some()),
                 ("--alpha", self.alpha.is_some()),
                 ("--k", self.k.is_some()),
+                ("--volume-radius-ratio", self.volume_radius_ratio.is_some()),
             ] {
                 if given {
                     anyhow::bail!("{flag} applies to --integrator sppm");
@@ -115,6 +120,7 @@ impl JobArgs {
             radius: self.radius,
             alpha: self.alpha,
             k: self.k,
+            volume_radius_ratio: self.volume_radius_ratio,
             defines: self.define.clone(),
             seed: self.seed,
             checkpoint_every: self.checkpoint_every,

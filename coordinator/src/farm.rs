@@ -96,8 +96,9 @@ struct JobEntry {
     width: u32,
     height: u32,
     total: u64,
-    /// SPPM radii of every pass, computed once so every batch gets the same bits.
-    radii: Vec<f32>,
+    /// SPPM (surface, volume) radii of every pass, computed once so every batch gets the
+    /// same bits.
+    radii: Vec<[f32; 2]>,
     acc: Accumulator,
     started: Option<Instant>,
     finished: Option<Instant>,
@@ -123,9 +124,9 @@ fn unix_ms() -> u64 {
         .map_or(0, |d| d.as_millis() as u64)
 }
 
-fn radii_for(render: &RenderSettings, total: u64) -> Vec<f32> {
+fn radii_for(render: &RenderSettings, total: u64) -> Vec<[f32; 2]> {
     match &render.method {
-        Method::Sppm(s) => s.schedule().radii(0..total),
+        Method::Sppm(s) => s.radii(0..total),
         Method::Path(_) => Vec::new(),
     }
 }

@@ -42,10 +42,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         Method::Path(_) => ("passes", None),
         Method::Sppm(s) => {
             eprintln!(
-                "SPPM: {} photons per iteration, initial radius {:.4e}, alpha {:.3}, k {}",
-                s.photons, s.initial_radius, s.alpha, s.k
+                "SPPM: {} photons per iteration, initial radius {:.4e} (volume {:.4e}), alpha {:.3}, k {}",
+                s.photons,
+                s.initial_radius,
+                s.initial_radius * s.volume_radius_ratio,
+                s.alpha,
+                s.k
             );
-            ("iterations", Some(s.schedule()))
+            ("iterations", Some(*s))
         }
     };
     let threads = args

@@ -59,6 +59,9 @@ pub enum Bsdf {
     Blend(Box<(Bsdf, Bsdf)>, f32),
     /// Front material and back material (Mitsuba's `twosided`).
     TwoSided(Box<(Bsdf, Bsdf)>),
+    /// No surface at all (Mitsuba's `null`): the boundary of a medium, which rays cross
+    /// unchanged.
+    Null,
 }
 
 impl Bsdf {
@@ -69,6 +72,13 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.sample(wi, u2),
             Bsdf::Dielectric(b) => b.sample(wi, u1, mode),
             Bsdf::Plastic(b) => b.sample(wi, u1, u2),
+            Bsdf::Null => Some(BsdfSample {
+                wo: -wi,
+                weight: Rgb::ONE,
+                pdf: 1.0,
+                delta: true,
+                eta: 1.0,
+            }),
             Bsdf::Blend(pair, w) => {
                 let (first, second) = (&pair.0, &pair.1);
                 let (chosen, u1) = if u1 >= *w {
@@ -106,7 +116,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.eval(wi, wo),
             Bsdf::Conductor(b) => b.eval(wi, wo),
-            Bsdf::Dielectric(_) => Rgb::ZERO,
+            Bsdf::Dielectric(_) | Bsdf::Null => Rgb::ZERO,
             Bsdf::Plastic(b) => b.eval(wi, wo),
             Bsdf::Blend(pair, w) => (1.0 - w) * pair.0.eval(wi, wo) + *w * pair.1.eval(wi, wo),
             Bsdf::TwoSided(pair) => {
@@ -125,7 +135,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
             Bsdf::Conductor(b) => b.pdf(wi, wo),
-            Bsdf::Dielectric(_) => 0.0,
+            Bsdf::Dielectric(_) | Bsdf::Null => 0.0,
             Bsdf::Plastic(b) => b.pdf(wi, wo),
             Bsdf::Blend(pair, w) => (1.0 - w) * pair.0.pdf(wi, wo) + w * pair.1.pdf(wi, wo),
             Bsdf::TwoSided(pair) => {
@@ -145,7 +155,7 @@ impl Bsdf {
     pub fn gathers_photons(&self) -> bool {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) => false,
+            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
                 pair.0.gathers_photons() || pair.1.gathers_photons()
             }
@@ -157,9 +167,14 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
             Bsdf::Conductor(c) => c.roughness.is_some(),
-            Bsdf::Dielectric(_) => false,
+            Bsdf::Dielectric(_) | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_smooth() || pair.1.has_smooth(),
         }
+    }
+
+    /// Whether this is no surface at all: paths and photons cross it without a bounce.
+    pub fn is_null(&self) -> bool {
+        matches!(self, Bsdf::Null)
     }
 }
 

@@ -54,6 +54,19 @@ pub struct SurfacePoint {
     pub shape: u32,
 }
 
+impl SurfacePoint {
+    /// A point inside a medium: no surface, no error box, no normal.
+    pub fn in_medium(p: Vec3A) -> SurfacePoint {
+        SurfacePoint {
+            p,
+            p_err: Vec3A::ZERO,
+            ng: Vec3A::ZERO,
+            ns: Vec3A::ZERO,
+            shape: u32::MAX,
+        }
+    }
+}
+
 impl Primitive {
     /// Bounds of the primitive.
     pub fn bounds(&self) -> Aabb {

@@ -1,6 +1,7 @@
 //! Light arriving straight from the light sources, shared by the path tracer and SPPM's camera
-//! pass: light sampling at a surface, and emission found by BSDF sampling, each weighted against
-//! the other by multiple importance sampling.
+//! pass: light sampling at a surface or in a medium, and emission found by BSDF sampling, each
+//! weighted against the other by multiple importance sampling. Shadow rays cross media and
+//! medium boundaries, and carry their transmittance.
 
 use glam::{Vec2, Vec3A};
 
@@ -43,9 +44,9 @@ pub fn emitted(
     }
 }
 
-/// One light sample's contribution at `sp` (seen from local direction `wi_local`), weighted
-/// against BSDF sampling when `with_mis` (the path goes on to sample the BSDF) and in full
-/// otherwise.
+/// One light sample's contribution at surface `sp` (seen from local direction `wi_local`),
+/// through the media on the way, weighted against BSDF sampling when `with_mis` (the path goes
+/// on to sample the BSDF) and in full otherwise. `medium` is the medium the path arrived in.
 #[allow(clippy::too_many_arguments)]
 pub fn light_sample(
     scene: &Scene,
@@ -53,6 +54,7 @@ pub fn light_sample(
     sp: &SurfacePoint,
     frame: &Frame,
     wi_local: Vec3A,
+    medium: Option<u32>,
     u_select: f32,
     u: Vec2,
     with_mis: bool,
@@ -62,7 +64,13 @@ pub fn light_sample(
     };
     let wl = frame.to_local(ls.wi);
     let f = bsdf.eval(wi_local, wl);
-    if f == Rgb::ZERO || !scene.unoccluded(sp, &ls) {
+    if f == Rgb::ZERO {
+        return Rgb::ZERO;
+    }
+    // The shadow ray leaves on the light's side of the surface.
+    let shape = &scene.shapes[sp.shape as usize];
+    let tr = scene.transmittance(sp, &ls, shape.medium_after(ls.wi, sp.ng, medium));
+    if tr == Rgb::ZERO {
         return Rgb::ZERO;
     }
     let w = if with_mis && !ls.delta {
@@ -70,5 +78,33 @@ pub fn light_sample(
     } else {
         1.0
     };
-    f * ls.radiance * (w / ls.pdf)
+    f * tr * ls.radiance * (w / ls.pdf)
+}
+
+/// One light sample's contribution at point `p` inside `medium`, scattered back along the
+/// path (which travelled along `d`) by the phase function, weighted against phase sampling when
+/// `with_mis`. The medium's albedo is not included.
+pub fn light_sample_in_medium(
+    scene: &Scene,
+    p: Vec3A,
+    d: Vec3A,
+    medium: u32,
+    u_select: f32,
+    u: Vec2,
+    with_mis: bool,
+) -> Rgb {
+    let Some((_, ls)) = scene.sample_light(p, u_select, u) else {
+        return Rgb::ZERO;
+    };
+    let phase = scene.media[medium as usize].phase.eval(d, ls.wi);
+    let tr = scene.transmittance(&SurfacePoint::in_medium(p), &ls, Some(medium));
+    if tr == Rgb::ZERO {
+        return Rgb::ZERO;
+    }
+    let w = if with_mis && !ls.delta {
+        mis_weight(ls.pdf, phase)
+    } else {
+        1.0
+    };
+    tr * ls.radiance * (phase * w / ls.pdf)
 }

@@ -1,11 +1,13 @@
-//! A unidirectional path tracer with next-event estimation and multiple importance sampling,
-//! following Mitsuba 3's `path` integrator so that both converge to the same image with
-//! similar noise: same depth meaning, same Russian roulette.
+//! A unidirectional volumetric path tracer with next-event estimation and multiple importance
+//! sampling, following Mitsuba 3's `path` and `volpath` integrators so that both converge to the
+//! same image with similar noise: same depth meaning, same Russian roulette, free flights in
+//! homogeneous media, medium boundaries crossed without a bounce.
 
 use super::direct::{self, PreviousBounce};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::geometry::{Frame, Ray};
+use crate::medium::Flight;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 
@@ -13,7 +15,8 @@ use crate::scene::Scene;
 #[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 pub struct PathSettings {
     /// Longest path in Mitsuba's meaning: 1 renders emitters seen directly, 2 adds direct
-    /// light, and so on; `None` is unlimited (Russian roulette ends paths).
+    /// light, and so on; `None` is unlimited (Russian roulette ends paths). Scattering in a
+    /// medium counts as a bounce.
     pub max_depth: Option<u32>,
     /// Path depth from which Russian roulette applies.
     pub rr_depth: u32,
@@ -29,7 +32,7 @@ impl PathSettings {
     }
 }
 
-/// Radiance arriving along `ray`.
+/// Radiance arriving along `ray` (unit direction), which starts in the camera's medium.
 pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &mut Sampler) -> Rgb {
     let max_depth = settings.max_depth.unwrap_or(u32::MAX);
     let mut l = Rgb::ZERO;
@@ -37,10 +40,54 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
     let mut eta = 1.0f32;
     let mut prev: Option<PreviousBounce> = None;
     let mut depth = 0u32;
-    // A ray that leaves the scene ends the path: there are no environment lights in our subset.
-    while let Some((_, sp)) = scene.intersect(&ray) {
-        let wo = -ray.d;
+    let mut medium = scene.camera_medium;
+    // Medium boundaries do not count as bounces; this bounds a path through many of them.
+    let mut crossings = 0u32;
+    loop {
+        let hit = scene.intersect(&ray);
+        let t_surface = hit.as_ref().map_or(f32::INFINITY, |(h, _)| h.t);
+
+        // A free flight through the medium: scatter in it, or reach the surface.
+        if let Some(m) = medium {
+            let med = &scene.media[m as usize];
+            match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
+                Flight::Collision { t, weight } => {
+                    beta *= weight * med.albedo;
+                    if depth + 1 >= max_depth {
+                        break;
+                    }
+                    let p = ray.at(t);
+                    let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
+                    l += beta * direct::light_sample_in_medium(scene, p, ray.d, m, u_sel, u_light, true);
+                    let (d, pdf) = med.phase.sample(ray.d, sampler.next_2d());
+                    prev = Some(PreviousBounce { p, pdf, delta: false });
+                    ray = Ray::new(p, d);
+                    depth += 1;
+                    if !russian_roulette(&mut beta, eta, depth, settings, sampler) {
+                        break;
+                    }
+                    continue;
+                }
+                Flight::Passed { weight } => beta *= weight,
+            }
+        }
+
+        // A ray that leaves the scene ends the path: there are no environment lights.
+        let Some((_, sp)) = hit else {
+            break;
+        };
         let shape = &scene.shapes[sp.shape as usize];
+        let bsdf = &scene.bsdfs[shape.bsdf as usize];
+        if bsdf.is_null() {
+            crossings += 1;
+            if crossings > 1024 {
+                break;
+            }
+            medium = shape.medium_after(ray.d, sp.ng, medium);
+            ray = Scene::spawn_ray(&sp, ray.d);
+            continue;
+        }
+        let wo = -ray.d;
 
         // Emission found by the camera ray or by BSDF sampling.
         if let Some(li) = shape.light {
@@ -49,8 +96,6 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
         if depth + 1 >= max_depth {
             break;
         }
-
-        let bsdf = &scene.bsdfs[shape.bsdf as usize];
         let frame = Frame::from_normal(sp.ns);
         let wi_local = frame.to_local(wo);
 
@@ -58,7 +103,10 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
         let u_light = sampler.next_1d();
         let u_light2 = sampler.next_2d();
         if bsdf.has_smooth() {
-            l += beta * direct::light_sample(scene, bsdf, &sp, &frame, wi_local, u_light, u_light2, true);
+            l += beta
+                * direct::light_sample(
+                    scene, bsdf, &sp, &frame, wi_local, medium, u_light, u_light2, true,
+                );
         }
 
         // BSDF sampling for the next bounce.
@@ -75,20 +123,31 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
             pdf: bs.pdf,
             delta: bs.delta,
         });
+        medium = shape.medium_after(wi, sp.ng, medium);
         ray = Scene::spawn_ray(&sp, wi);
         depth += 1;
-
-        // Russian roulette, as Mitsuba: survival by throughput, corrected for refraction.
-        if depth > settings.rr_depth {
-            let q = (beta.max_element() * eta * eta).min(0.95);
-            if sampler.next_1d() >= q {
-                break;
-            }
-            beta /= q;
-        }
-        if beta == Rgb::ZERO {
+        if !russian_roulette(&mut beta, eta, depth, settings, sampler) {
             break;
         }
     }
     l
+}
+
+/// Mitsuba's Russian roulette: from `rr_depth` on, survival by throughput (corrected for
+/// refraction); false when the path ends.
+fn russian_roulette(
+    beta: &mut Rgb,
+    eta: f32,
+    depth: u32,
+    settings: &PathSettings,
+    sampler: &mut Sampler,
+) -> bool {
+    if depth > settings.rr_depth {
+        let q = (beta.max_element() * eta * eta).min(0.95);
+        if sampler.next_1d() >= q {
+            return false;
+        }
+        *beta /= q;
+    }
+    *beta != Rgb::ZERO
 }

@@ -4,10 +4,12 @@
 //! the same code, so both see the same lights.
 
 mod area;
+mod beam;
 mod point;
 mod spot;
 
 pub use area::AreaLight;
+pub use beam::BeamLight;
 pub use point::PointLight;
 pub use spot::SpotLight;
 
@@ -60,6 +62,8 @@ pub enum Light {
     Point(PointLight),
     /// Point with Mitsuba's spot falloff.
     Spot(SpotLight),
+    /// Collimated beam from a disc.
+    Beam(BeamLight),
 }
 
 impl Light {
@@ -74,6 +78,7 @@ impl Light {
             Light::Area(l) => l.sample_li(p, prims, u),
             Light::Point(l) => l.sample_li(p),
             Light::Spot(l) => l.sample_li(p),
+            Light::Beam(l) => l.sample_li(p),
         }
     }
 
@@ -88,6 +93,7 @@ impl Light {
             Light::Area(l) => l.sample_emission(prims, u_pos, u_dir),
             Light::Point(l) => l.sample_emission(u_dir),
             Light::Spot(l) => l.sample_emission(u_dir),
+            Light::Beam(l) => l.sample_emission(u_pos),
         }
     }
 
@@ -97,6 +103,7 @@ impl Light {
             Light::Area(l) => l.power(),
             Light::Point(l) => l.power(),
             Light::Spot(l) => l.power(),
+            Light::Beam(l) => l.power(),
         }
     }
 }

@@ -13,8 +13,10 @@ use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
 use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Ggx, Plastic};
 use crate::camera::Camera;
 use crate::color::Rgb;
+use crate::geometry::Frame;
 use crate::geometry::{Bvh, Primitive, Sphere, Triangle};
-use crate::light::{AreaLight, Light, PointLight, SpotLight};
+use crate::light::{AreaLight, BeamLight, Light, PointLight, SpotLight};
+use crate::medium::{Medium, Phase};
 use crate::sampling::Distribution1D;
 
 pub(super) fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
@@ -50,6 +52,10 @@ struct Builder<'a> {
     /// Area emitters, by shape, until the BVH has fixed the primitives' order.
     area_emitters: Vec<(u32, Rgb)>,
     lights: Vec<Light>,
+    light_media: Vec<Option<u32>>,
+    media: Vec<Medium>,
+    medium_ids: HashMap<String, u32>,
+    camera_medium: Option<u32>,
     warnings: Vec<String>,
     files: Vec<std::path::PathBuf>,
 }
@@ -64,6 +70,10 @@ impl<'a> Builder<'a> {
             prims: Vec::new(),
             area_emitters: Vec::new(),
             lights: Vec::new(),
+            light_media: Vec::new(),
+            media: Vec::new(),
+            medium_ids: HashMap::new(),
+            camera_medium: None,
             warnings: Vec::new(),
             files: Vec::new(),
         }
@@ -73,20 +83,30 @@ impl<'a> Builder<'a> {
         let ctx = self.ctx;
         let mut sensor = None;
         let mut integrator = None;
-        // Named materials first, so that shapes may refer to them wherever they are declared.
+        // Named media and materials first, so that shapes may refer to them wherever they are
+        // declared.
+        for el in root.children.iter().filter(|e| e.tag == "medium") {
+            let Some(id) = el.attr("id") else {
+                return Err(ctx.err(el, "a top-level <medium> needs an id to be referred to"));
+            };
+            let index = self.medium(el)?;
+            if self.medium_ids.insert(id.to_string(), index).is_some() || self.bsdf_ids.contains_key(id) {
+                return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
+            }
+        }
         for el in root.children.iter().filter(|e| e.tag == "bsdf") {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
             if let Some(id) = el.attr("id")
-                && self.bsdf_ids.insert(id.to_string(), index).is_some()
+                && (self.bsdf_ids.insert(id.to_string(), index).is_some() || self.medium_ids.contains_key(id))
             {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
         }
         for el in &root.children {
             match el.tag.as_str() {
-                "bsdf" => {}
+                "bsdf" | "medium" => {}
                 "shape" => self.shape(el)?,
                 "emitter" => self.emitter(el)?,
                 "sensor" if sensor.is_some() => return Err(ctx.err(el, "only one <sensor> is supported")),
@@ -120,6 +140,11 @@ impl<'a> Builder<'a> {
             self.warnings
                 .push("the scene has no light source: the image will be black".into());
         }
+        let null_shapes = self
+            .shapes
+            .iter()
+            .filter(|s| self.bsdfs[s.bsdf as usize].is_null())
+            .count();
         let powers: Vec<f32> = self.lights.iter().map(Light::power).collect();
         let light_selection = Distribution1D::new(&powers);
         if !self.lights.is_empty() && light_selection.is_empty() {
@@ -132,12 +157,16 @@ impl<'a> Builder<'a> {
             shapes: self.shapes,
             bsdfs: self.bsdfs,
             lights: self.lights,
+            light_media: self.light_media,
+            media: self.media,
+            camera_medium: self.camera_medium,
             light_selection,
             camera,
             spp,
             integrator,
             warnings: self.warnings,
             files: self.files,
+            null_shapes,
         })
     }
 
@@ -150,6 +179,8 @@ impl<'a> Builder<'a> {
         for (shape, radiance) in std::mem::take(&mut self.area_emitters) {
             let prims = by_shape.remove(&shape).unwrap_or_default();
             self.shapes[shape as usize].light = Some(self.lights.len() as u32);
+            // An area light's photons start in the medium outside its shape.
+            self.light_media.push(self.shapes[shape as usize].exterior);
             self.lights
                 .push(Light::Area(AreaLight::new(radiance, prims, bvh.primitives())));
         }
@@ -360,10 +391,95 @@ impl<'a> Builder<'a> {
 
     fn nested_bsdfs(&mut self, p: &Props) -> Res<Vec<Bsdf>> {
         let mut out = Vec::new();
-        for c in p.objects("bsdf").into_iter().chain(p.objects("ref")) {
+        let refs: Vec<&Element> = p
+            .objects("ref")
+            .into_iter()
+            .filter(|c| !c.attr("id").is_some_and(|id| self.medium_ids.contains_key(id)))
+            .collect();
+        for c in p.objects("bsdf").into_iter().chain(refs) {
             out.push(self.bsdf_or_ref(c)?);
         }
         Ok(out)
+    }
+
+    /// The media an element declares: `interior`, `exterior` (shapes) or an unnamed one
+    /// (sensors, emitters), each as a nested `<medium>` or a `<ref>`.
+    fn media_of(&mut self, p: &Props, named: bool) -> Res<(Option<u32>, Option<u32>, Option<u32>)> {
+        let mut out = (None, None, None);
+        let refs: Vec<&Element> = p
+            .objects("ref")
+            .into_iter()
+            .filter(|c| c.attr("id").is_some_and(|id| self.medium_ids.contains_key(id)))
+            .collect();
+        for c in p.objects("medium").into_iter().chain(refs) {
+            let index = if c.tag == "ref" {
+                self.medium_ids[c.attr("id").expect("filtered")]
+            } else {
+                self.medium(c)?
+            };
+            let slot = match (named, c.attr("name")) {
+                (true, Some("interior")) => &mut out.0,
+                (true, Some("exterior")) => &mut out.1,
+                (true, _) => {
+                    return Err(self
+                        .ctx
+                        .err(c, "a shape's medium needs name=\"interior\" or name=\"exterior\""));
+                }
+                (false, _) => &mut out.2,
+            };
+            if slot.replace(index).is_some() {
+                return Err(self.ctx.err(c, "this medium is given twice"));
+            }
+        }
+        Ok(out)
+    }
+
+    /// `<medium type="homogeneous">` with an optional nested `<phase>`.
+    fn medium(&mut self, el: &Element) -> Res<u32> {
+        let p = Props::new(self.ctx, el)?;
+        if p.kind()? != "homogeneous" {
+            return Err(self.ctx.err(el, "only homogeneous media are supported"));
+        }
+        let scale = p.float_or("scale", 1.0)?;
+        if scale < 0.0 {
+            return Err(p.err_at("scale", "scale cannot be negative".into()));
+        }
+        let sigma_t = p.non_negative_rgb("sigma_t", Rgb::ONE)? * scale;
+        let albedo = p.reflectance("albedo", Rgb::splat(0.75))?;
+        let _ = p.boolean("sample_emitters")?;
+        let phase = match p.object("phase")? {
+            None => Phase::Isotropic,
+            Some(ph) => {
+                let pp = Props::new(self.ctx, ph)?;
+                let phase = match pp.kind()? {
+                    "isotropic" => Phase::Isotropic,
+                    "hg" => {
+                        let g = pp.float_or("g", 0.8)?;
+                        if !(g > -1.0 && g < 1.0) {
+                            return Err(
+                                pp.err_at("g", format!("g must lie strictly between -1 and 1, not {g}"))
+                            );
+                        }
+                        Phase::HenyeyGreenstein(g)
+                    }
+                    other => {
+                        return Err(self.ctx.err(
+                            ph,
+                            format!("phase type \"{other}\" is not supported (isotropic, hg)"),
+                        ));
+                    }
+                };
+                pp.finish()?;
+                phase
+            }
+        };
+        p.finish()?;
+        self.media.push(Medium {
+            sigma_t,
+            albedo,
+            phase,
+        });
+        Ok(self.media.len() as u32 - 1)
     }
 
     fn bsdf(&mut self, el: &Element) -> Res<Bsdf> {
@@ -431,6 +547,7 @@ impl<'a> Builder<'a> {
                     }
                 }
             }
+            "null" => Bsdf::Null,
             "blendbsdf" => {
                 let w = p.float_or("weight", 0.5)?;
                 if !(0.0..=1.0).contains(&w) {
@@ -578,8 +695,11 @@ impl<'a> Builder<'a> {
             self.push_mesh(mesh.transformed(&to_world), index, flip);
         }
 
+        let (interior, exterior, _) = self.media_of(&p, true)?;
         let nested = self.nested_bsdfs(&p)?;
         let bsdf = match nested.len() {
+            // A medium's boundary without a material is no surface at all, as in Mitsuba.
+            0 if interior.is_some() || exterior.is_some() => Bsdf::Null,
             0 => Bsdf::Diffuse(Diffuse {
                 reflectance: Rgb::splat(0.5),
             }),
@@ -604,6 +724,8 @@ impl<'a> Builder<'a> {
                 .unwrap_or_else(|| format!("{kind} at line {}", el.line)),
             bsdf: self.bsdfs.len() as u32 - 1,
             light: None,
+            interior,
+            exterior,
         });
         Ok(())
     }
@@ -626,6 +748,7 @@ impl<'a> Builder<'a> {
 
     fn emitter(&mut self, el: &Element) -> Res<()> {
         let p = Props::new(self.ctx, el)?;
+        let (_, _, medium) = self.media_of(&p, false)?;
         let light = match p.kind()? {
             "point" => {
                 let position = match (p.point("position")?, p.transform("to_world")?) {
@@ -659,6 +782,40 @@ impl<'a> Builder<'a> {
                     beam_width: beam.to_radians(),
                 })
             }
+            "beam" => {
+                let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+                let (scale, rotation, translation) = m.to_scale_rotation_translation();
+                if (scale - glam::Vec3::ONE).abs().max_element() > 1e-4 {
+                    return Err(p.err_at(
+                        "to_world",
+                        "a beam's to_world places and turns it; set its size with radius".into(),
+                    ));
+                }
+                let radius = p.positive("radius", 1.0)?;
+                let area = std::f32::consts::PI * radius * radius;
+                let irradiance = match (p.rgb("irradiance")?, p.rgb("power")?) {
+                    (Some(_), Some(_)) => return Err(self.ctx.err(el, "give irradiance or power, not both")),
+                    (Some(e), None) => e,
+                    (None, Some(w)) => w / area,
+                    (None, None) => Rgb::ONE,
+                };
+                if irradiance.min_element() < 0.0 {
+                    return Err(self
+                        .ctx
+                        .err(el, "a beam's irradiance or power cannot be negative"));
+                }
+                let rot = Mat3A::from_quat(rotation);
+                Light::Beam(BeamLight {
+                    origin: translation.into(),
+                    frame: Frame {
+                        s: rot.x_axis,
+                        t: rot.y_axis,
+                        n: rot.z_axis,
+                    },
+                    radius,
+                    irradiance,
+                })
+            }
             "area" => {
                 return Err(self
                     .ctx
@@ -667,12 +824,13 @@ impl<'a> Builder<'a> {
             other => {
                 return Err(self.ctx.err(
                     el,
-                    format!("emitter type \"{other}\" is not supported (point, spot, area)"),
+                    format!("emitter type \"{other}\" is not supported (point, spot, area, beam)"),
                 ));
             }
         };
         p.finish()?;
         self.lights.push(light);
+        self.light_media.push(medium);
         Ok(())
     }
 }

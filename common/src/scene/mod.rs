@@ -34,6 +34,25 @@ pub struct ShapeInfo {
     pub bsdf: u32,
     /// Index into [`Scene::lights`] if the shape emits.
     pub light: Option<u32>,
+    /// Medium inside the shape (index into [`Scene::media`]).
+    pub interior: Option<u32>,
+    /// Medium outside the shape.
+    pub exterior: Option<u32>,
+}
+
+impl ShapeInfo {
+    /// The medium a ray is in after leaving this surface in direction `d` (geometric normal
+    /// `ng`), coming from `current`. As in Mitsuba, only shapes that declare a medium change it.
+    pub fn medium_after(&self, d: Vec3A, ng: Vec3A, current: Option<u32>) -> Option<u32> {
+        if self.interior.is_none() && self.exterior.is_none() {
+            return current;
+        }
+        if d.dot(ng) < 0.0 {
+            self.interior
+        } else {
+            self.exterior
+        }
+    }
 }
 
 /// The `<integrator>` element: the method is chosen on the command line, but its parameters
@@ -63,6 +82,12 @@ pub struct Scene {
     pub bsdfs: Vec<Bsdf>,
     /// Lights.
     pub lights: Vec<Light>,
+    /// The medium each light emits into (photons start there), by light index.
+    pub light_media: Vec<Option<u32>>,
+    /// Participating media.
+    pub media: Vec<crate::medium::Medium>,
+    /// The medium the camera is in.
+    pub camera_medium: Option<u32>,
     /// Chooses a light in proportion to its power.
     pub light_selection: Distribution1D,
     /// The sensor.
@@ -76,6 +101,8 @@ pub struct Scene {
     /// Files the scene reads besides itself (meshes), relative to its folder: what a job
     /// bundle must carry.
     pub files: Vec<PathBuf>,
+    /// How many shapes have a null BSDF (shadow rays must look past them).
+    pub null_shapes: usize,
 }
 
 impl Scene {
@@ -118,15 +145,59 @@ impl Scene {
 
     /// Whether nothing blocks the segment from `sp` to the sampled light point.
     pub fn unoccluded(&self, sp: &SurfacePoint, ls: &LightSample) -> bool {
-        let o = offset_ray_origin(sp.p, sp.p_err, sp.ng, ls.wi);
+        self.transmittance(sp, ls, None) != crate::color::Rgb::ZERO
+    }
+
+    /// The fraction of light that travels from the sampled light point to `sp` (a surface, or
+    /// a point in a medium with zero error and normal), starting in `medium` at `sp`: zero if a
+    /// surface blocks it, the media's transmittance otherwise. Null surfaces (medium
+    /// boundaries) are crossed, changing the medium.
+    pub fn transmittance(
+        &self,
+        sp: &SurfacePoint,
+        ls: &LightSample,
+        mut medium: Option<u32>,
+    ) -> crate::color::Rgb {
+        use crate::color::Rgb;
+        let mut o = offset_ray_origin(sp.p, sp.p_err, sp.ng, ls.wi);
         let target = if ls.n == Vec3A::ZERO {
             ls.p
         } else {
             offset_ray_origin(ls.p, ls.p_err, ls.n, o - ls.p)
         };
-        let d = target - o;
-        // Stop just short of the target so the light's own surface does not count.
-        !self.bvh.occluded(&Ray::new(o, d), 1.0 - 1e-4)
+        let mut tr = Rgb::ONE;
+        // Bounded, in case of pathological geometry: 64 boundaries between a point and a light.
+        for _ in 0..64 {
+            let d = target - o;
+            let len = d.length();
+            // Stop just short of the target so the light's own surface does not count.
+            let hit = if self.media.is_empty() && self.null_shapes == 0 {
+                if self.bvh.occluded(&Ray::new(o, d), 1.0 - 1e-4) {
+                    return Rgb::ZERO;
+                }
+                None
+            } else {
+                self.bvh.intersect(&Ray::new(o, d), 1.0 - 1e-4)
+            };
+            let Some(hit) = hit else {
+                if let Some(m) = medium {
+                    tr *= self.media[m as usize].transmittance(len);
+                }
+                return tr;
+            };
+            let prim = &self.bvh.primitives()[hit.prim as usize];
+            let surface = prim.surface(&Ray::new(o, d), &hit);
+            let shape = &self.shapes[surface.shape as usize];
+            if !self.bsdfs[shape.bsdf as usize].is_null() {
+                return Rgb::ZERO;
+            }
+            if let Some(m) = medium {
+                tr *= self.media[m as usize].transmittance(hit.t * len);
+            }
+            medium = shape.medium_after(d, surface.ng, medium);
+            o = offset_ray_origin(surface.p, surface.p_err, surface.ng, d);
+        }
+        Rgb::ZERO
     }
 
     /// Picks a light by power and samples it from `p`; the pdf includes the choice.

@@ -16,7 +16,7 @@ pub use gather::{GatherContext, camera_path};
 pub use photon::Photon;
 pub use photon_map::PhotonMap;
 pub use radius::RadiusSchedule;
-pub use trace::{power_unit, trace_photons};
+pub use trace::{PhotonBuffers, power_unit, trace_photons};
 
 use crate::scene::Scene;
 
@@ -31,6 +31,8 @@ pub struct SppmSettings {
     pub alpha: f64,
     /// Cone filter parameter k ≥ 1.
     pub k: f32,
+    /// Initial volume radius over the initial surface radius.
+    pub volume_radius_ratio: f32,
     /// Longest photon path and longest camera path (None: Russian roulette decides).
     pub max_depth: Option<u32>,
     /// Depth from which the camera path's Russian roulette applies.
@@ -52,6 +54,9 @@ pub enum SppmError {
     /// k below 1.
     #[error("the cone filter's k must be at least 1, not {0}")]
     K(f32),
+    /// A volume radius ratio that is not a positive number.
+    #[error("the volume radius ratio must be a positive number, not {0}")]
+    VolumeRatio(f32),
 }
 
 impl SppmSettings {
@@ -69,6 +74,9 @@ impl SppmSettings {
         if !(self.k >= 1.0 && self.k.is_finite()) {
             return Err(SppmError::K(self.k));
         }
+        if !(self.volume_radius_ratio > 0.0 && self.volume_radius_ratio.is_finite()) {
+            return Err(SppmError::VolumeRatio(self.volume_radius_ratio));
+        }
         Ok(())
     }
 
@@ -82,6 +90,7 @@ impl SppmSettings {
             initial_radius: 0.0,
             alpha: 2.0 / 3.0,
             k: 1.1,
+            volume_radius_ratio: 2.0,
             max_depth: u32::try_from(decl.max_depth).ok(),
             rr_depth: decl.rr_depth,
         };
@@ -93,6 +102,7 @@ impl SppmSettings {
                     "initial_radius" => s.initial_radius = *v as f32,
                     "alpha" => s.alpha = *v,
                     "k" => s.k = *v as f32,
+                    "volume_radius_ratio" => s.volume_radius_ratio = *v as f32,
                     "samples_per_pass" | "iterations" => {}
                     other => warnings.push(format!(
                         "<integrator type=\"sppm\">: parameter '{other}' is not used"
@@ -106,13 +116,30 @@ impl SppmSettings {
         (s, warnings)
     }
 
-    /// The surface radius schedule.
+    /// The surface radius schedule (r² shrinks).
     pub fn schedule(&self) -> RadiusSchedule {
         RadiusSchedule {
             initial: self.initial_radius as f64,
             alpha: self.alpha,
             dimension: 2,
         }
+    }
+
+    /// The volume radius schedule (r³ shrinks, from `volume_radius_ratio` times the surface
+    /// radius).
+    pub fn volume_schedule(&self) -> RadiusSchedule {
+        RadiusSchedule {
+            initial: self.initial_radius as f64 * self.volume_radius_ratio as f64,
+            alpha: self.alpha,
+            dimension: 3,
+        }
+    }
+
+    /// (surface, volume) radii of iterations `range`.
+    pub fn radii(&self, range: std::ops::Range<u64>) -> Vec<[f32; 2]> {
+        let surface = self.schedule().radii(range.clone());
+        let volume = self.volume_schedule().radii(range);
+        surface.into_iter().zip(volume).map(|(s, v)| [s, v]).collect()
     }
 }
 

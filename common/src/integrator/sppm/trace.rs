@@ -1,17 +1,28 @@
-//! The photon pass: photons leave the lights in proportion to their power, bounce through the
-//! scene with Russian roulette, and are stored where a surface has a non-specular part.
+//! The photon pass: photons leave the lights in proportion to their power, fly through media
+//! and bounce off surfaces with Russian roulette, and are stored where a surface has a diffuse
+//! part and where they collide in a medium.
 
 use rayon::prelude::*;
 
 use super::photon::Photon;
 use crate::bsdf::TransportMode;
 use crate::geometry::{Frame, Ray, offset_ray_origin};
+use crate::medium::Flight;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
 /// Photons traced per parallel task: large enough to amortise scheduling, small enough to
 /// balance two to dozens of threads.
 const CHUNK: u64 = 4096;
+
+/// The photons of one iteration.
+#[derive(Debug, Default)]
+pub struct PhotonBuffers {
+    /// Photons on surfaces.
+    pub surface: Vec<Photon>,
+    /// Photons at collisions in media.
+    pub volume: Vec<Photon>,
+}
 
 /// Traces photons 0..count of `iteration` into `out` (cleared first). Power is in units of
 /// [`power_unit`]. The result is in photon-index order whatever the thread count.
@@ -21,16 +32,17 @@ pub fn trace_photons(
     iteration: u64,
     count: u64,
     max_depth: u32,
-    out: &mut Vec<Photon>,
+    out: &mut PhotonBuffers,
 ) {
-    out.clear();
+    out.surface.clear();
+    out.volume.clear();
     if scene.light_selection.is_empty() {
         return;
     }
-    let chunks: Vec<Vec<Photon>> = (0..count.div_ceil(CHUNK))
+    let chunks: Vec<PhotonBuffers> = (0..count.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
-            let mut v = Vec::new();
+            let mut v = PhotonBuffers::default();
             for j in c * CHUNK..((c + 1) * CHUNK).min(count) {
                 trace_one(scene, seed, iteration, j, max_depth, &mut v);
             }
@@ -38,7 +50,8 @@ pub fn trace_photons(
         })
         .collect();
     for c in chunks {
-        out.extend_from_slice(&c);
+        out.surface.extend_from_slice(&c.surface);
+        out.volume.extend_from_slice(&c.volume);
     }
 }
 
@@ -48,7 +61,7 @@ pub fn power_unit(scene: &Scene, count: u64) -> f32 {
     scene.light_selection.total() / count as f32
 }
 
-fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u32, out: &mut Vec<Photon>) {
+fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u32, out: &mut PhotonBuffers) {
     let mut s = Sampler::new(seed, Stream::Photon, iteration, index);
     let (light, pmf, _) = scene.light_selection.sample(s.next_1d());
     let u_pos = s.next_2d();
@@ -64,17 +77,55 @@ fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u3
         offset_ray_origin(e.origin, e.origin_err, e.n, e.dir)
     };
     let mut ray = Ray::new(origin, e.dir);
-    for depth in 0..max_depth {
-        let Some((_, sp)) = scene.intersect(&ray) else {
+    let mut medium = scene.light_media[light];
+    let mut depth = 0u32;
+    let mut crossings = 0u32;
+    while depth < max_depth {
+        let hit = scene.intersect(&ray);
+        let t_surface = hit.as_ref().map_or(f32::INFINITY, |(h, _)| h.t);
+        if let Some(m) = medium {
+            let med = &scene.media[m as usize];
+            match med.sample_flight(t_surface, s.next_1d(), s.next_1d()) {
+                Flight::Collision { t, weight } => {
+                    beta *= weight;
+                    let p = ray.at(t);
+                    // As on surfaces, the first collision is direct light, sampled by the camera.
+                    if depth > 0 {
+                        out.volume.push(Photon::new(p, -ray.d, beta));
+                    }
+                    // Scatter with probability of the albedo; survivors keep their power.
+                    let q = med.albedo.max_element().min(1.0);
+                    if s.next_1d() >= q {
+                        return;
+                    }
+                    beta *= med.albedo / q;
+                    let (d, _) = med.phase.sample(ray.d, s.next_2d());
+                    ray = Ray::new(p, d);
+                    depth += 1;
+                    continue;
+                }
+                Flight::Passed { weight } => beta *= weight,
+            }
+        }
+        let Some((_, sp)) = hit else {
             return;
         };
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
+        if bsdf.is_null() {
+            crossings += 1;
+            if crossings > 1024 {
+                return;
+            }
+            medium = shape.medium_after(ray.d, sp.ng, medium);
+            ray = Scene::spawn_ray(&sp, ray.d);
+            continue;
+        }
         let wi = -ray.d;
         // The first hit is direct light, which the camera pass samples explicitly; photons are
         // kept only where the camera pass gathers them.
         if depth > 0 && bsdf.gathers_photons() {
-            out.push(Photon::new(sp.p, wi, beta));
+            out.surface.push(Photon::new(sp.p, wi, beta));
         }
         let frame = Frame::from_normal(sp.ns);
         let u1 = s.next_1d();
@@ -88,6 +139,9 @@ fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u3
             return;
         }
         beta *= bs.weight / q;
-        ray = Scene::spawn_ray(&sp, frame.to_world(bs.wo));
+        let d = frame.to_world(bs.wo);
+        medium = shape.medium_after(d, sp.ng, medium);
+        ray = Scene::spawn_ray(&sp, d);
+        depth += 1;
     }
 }
