@@ -25,6 +25,9 @@ pub fn scenes_dir() -> PathBuf {
 pub struct Comparison {
     /// Mean squared error over all pixels and the three channels.
     pub mse: f64,
+    /// Mean absolute error: unlike the MSE it converges for estimators whose variance is
+    /// infinite (light sampling of a point light from inside a medium).
+    pub mae: f64,
     /// Channel means of the image.
     pub mean: [f64; 3],
     /// Channel means of the reference.
@@ -54,13 +57,15 @@ pub fn channel_means(img: &[Rgb]) -> [f64; 3] {
 /// Compares two images of the same size.
 pub fn compare(img: &[Rgb], reference: &[Rgb]) -> Comparison {
     assert_eq!(img.len(), reference.len(), "images differ in size");
-    let mut se = 0.0f64;
+    let (mut se, mut ae) = (0.0f64, 0.0f64);
     for (a, b) in img.iter().zip(reference) {
         let d = *a - *b;
         se += (d.x as f64).powi(2) + (d.y as f64).powi(2) + (d.z as f64).powi(2);
+        ae += d.x.abs() as f64 + d.y.abs() as f64 + d.z.abs() as f64;
     }
     Comparison {
         mse: se / (3 * img.len()) as f64,
+        mae: ae / (3 * img.len()) as f64,
         mean: channel_means(img),
         reference_mean: channel_means(reference),
     }

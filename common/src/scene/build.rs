@@ -266,6 +266,8 @@ impl<'a> Builder<'a> {
         }
         let fov_axis = p.string("fov_axis")?.unwrap_or("x");
 
+        let (_, _, medium) = self.media_of(&p, false)?;
+        self.camera_medium = medium;
         let film = p
             .object("film")?
             .ok_or_else(|| self.ctx.err(el, "the sensor has no <film>"))?;

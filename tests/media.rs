@@ -1,0 +1,175 @@
+//! Participating media: both integrators against Mitsuba 3's `volpath`, exact attenuation
+//! through an absorbing slab, the volumetric caustic that only SPPM renders, and the iteration
+//! contract with volume photons.
+
+use std::path::Path;
+
+use photonfarm::render::render_sppm_iterations;
+use photonfarm_tests::{
+    Comparison, channel_means, compare, load, reference, refs_dir, render_path, render_sppm, scenes_dir,
+    sppm_settings,
+};
+
+fn report(what: &str, c: &Comparison) {
+    eprintln!(
+        "{what}: rmse {:.4}, mae {:.4}, means {:?} vs {:?}, worst mean error {:.2}%",
+        c.mse.sqrt(),
+        c.mae,
+        c.mean,
+        c.reference_mean,
+        100.0 * c.worst_mean_error()
+    );
+}
+
+/// `refs/fog.xml`: the camera in fog, a spot light, a sphere's volumetric shadow. Reference:
+/// Mitsuba 3.9.1 volpath, 32768 spp at 64×64 (its halves' channel means agree to 0.7%).
+#[test]
+fn fog_path_tracer_matches_mitsuba_volpath() {
+    let scene = load(&refs_dir().join("fog.xml"), &[("res", "64")]);
+    let reference = reference("fog.exr");
+    let few = compare(&render_path(&scene, 32, 1).image().unwrap(), &reference);
+    let many = compare(&render_path(&scene, 512, 1).image().unwrap(), &reference);
+    report("fog, path 32 spp", &few);
+    report("fog, path 512 spp", &many);
+    assert!(many.worst_mean_error() < 0.03, "{many:?}");
+    // Light sampling a point-like light from inside the fog has infinite variance (∫ 1/d² dd
+    // diverges at the light), so rare fireflies make the MSE erratic; the mean absolute error
+    // still falls. docs/stability.md has the figures.
+    assert!(
+        many.mae < 0.5 * few.mae,
+        "error must fall: {:.3e} then {:.3e}",
+        few.mae,
+        many.mae
+    );
+}
+
+#[test]
+fn fog_sppm_matches_mitsuba_volpath() {
+    let scene = load(&refs_dir().join("fog.xml"), &[("res", "64")]);
+    let settings = sppm_settings(&scene, 50_000);
+    let reference = reference("fog.exr");
+    let few = compare(&render_sppm(&scene, settings, 4, 1).image().unwrap(), &reference);
+    let many = compare(&render_sppm(&scene, settings, 64, 1).image().unwrap(), &reference);
+    report("fog, SPPM 4 iterations", &few);
+    report("fog, SPPM 64 iterations", &many);
+    assert!(many.worst_mean_error() < 0.03, "{many:?}");
+    assert!(
+        many.mse < 0.5 * few.mse,
+        "error must fall: {:.3e} then {:.3e}",
+        few.mse,
+        many.mse
+    );
+    assert!(
+        many.mae < 0.6 * few.mae,
+        "error must fall: {:.3e} then {:.3e}",
+        few.mae,
+        many.mae
+    );
+}
+
+/// A camera looking at an emitter of radiance 1 through a non-scattering slab sees exp(−σt d).
+#[test]
+fn slab_attenuates_the_view_by_exp_minus_sigma_d() {
+    let expect = (-1.0f64).exp();
+    let scene = load(&scenes_dir().join("slab.xml"), &[]);
+    let path = channel_means(&render_path(&scene, 1024, 1).image().unwrap())[0];
+    let sppm = channel_means(
+        &render_sppm(&scene, sppm_settings(&scene, 1000), 1024, 1)
+            .image()
+            .unwrap(),
+    )[0];
+    eprintln!("slab, emitter seen through it: path {path:.5}, SPPM {sppm:.5}, exp(-1) = {expect:.5}");
+    // Each sample passes or not (Bernoulli): 262,144 samples give a standard error of 0.1%.
+    assert!((path / expect - 1.0).abs() < 0.005, "{path}");
+    assert!((sppm / expect - 1.0).abs() < 0.005, "{sppm}");
+}
+
+/// A vertical beam crossing the slab lights a floor: exactly exp(−σt d) of the light arrives
+/// (light sampling through the medium and its boundaries), for both integrators.
+#[test]
+fn slab_attenuates_a_beam_by_exp_minus_sigma_d() {
+    let floor = |sigma: &str, sppm: bool| {
+        let scene = load(
+            &scenes_dir().join("slab.xml"),
+            &[("sigma", sigma), ("target", "0,-5,0"), ("emitter_radiance", "0")],
+        );
+        let img = if sppm {
+            render_sppm(&scene, sppm_settings(&scene, 20_000), 2, 1)
+        } else {
+            render_path(&scene, 2, 1)
+        };
+        channel_means(&img.image().unwrap())[0]
+    };
+    for sppm in [false, true] {
+        let (clear, one, two) = (floor("0", sppm), floor("1", sppm), floor("2", sppm));
+        eprintln!("slab, beam on floor (sppm {sppm}): {clear:.6} {one:.6} {two:.6}");
+        assert!(
+            (clear / (1.5 / std::f64::consts::PI) - 1.0).abs() < 1e-4,
+            "unattenuated: {clear}"
+        );
+        assert!(
+            (one / clear / (-1.0f64).exp() - 1.0).abs() < 1e-4,
+            "{}",
+            one / clear
+        );
+        assert!(
+            (two / clear / (-2.0f64).exp() - 1.0).abs() < 1e-4,
+            "{}",
+            two / clear
+        );
+    }
+}
+
+/// Behind the glass sphere the beam is focused into a volumetric caustic: SPPM renders it, the
+/// path tracer cannot (its beam light is blocked by the glass, and BSDF sampling never finds a
+/// collimated beam). Before the sphere both see the same beam.
+#[test]
+fn beam_through_glass_in_fog_makes_a_volumetric_caustic_with_sppm_only() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/beam-caustic.xml");
+    let scene = load(&path, &[("width", "96"), ("height", "54")]);
+    let sppm = render_sppm(&scene, sppm_settings(&scene, 100_000), 24, 1)
+        .image()
+        .unwrap();
+    let pt = render_path(&scene, 96, 1).image().unwrap();
+    // Mean red radiance over a block of columns in the beam's rows (the beam runs at
+    // mid-height from the left; the sphere spans the middle columns).
+    let block = |img: &[photonfarm::color::Rgb], x0: usize, x1: usize| {
+        let (w, mut sum, mut n) = (96usize, 0.0f64, 0usize);
+        for y in 14..26 {
+            for x in x0..x1 {
+                sum += img[y * w + x].x as f64;
+                n += 1;
+            }
+        }
+        sum / n as f64
+    };
+    let (before_sppm, before_path) = (block(&sppm, 2, 30), block(&pt, 2, 30));
+    let (after_sppm, after_path) = (block(&sppm, 52, 75), block(&pt, 52, 75));
+    eprintln!("beam before the sphere: SPPM {before_sppm:.4}, path {before_path:.4}");
+    eprintln!("beam after the sphere (caustic): SPPM {after_sppm:.4}, path {after_path:.4}");
+    assert!(
+        (before_sppm / before_path - 1.0).abs() < 0.15,
+        "the incoming beam should agree"
+    );
+    assert!(after_sppm > 3.0 * after_path, "SPPM should show the focused beam");
+}
+
+/// Volume photons keep the iteration contract: split renders add up to the same bytes.
+#[test]
+fn split_and_merge_is_bit_exact_in_fog() {
+    let scene = load(&refs_dir().join("fog.xml"), &[("res", "24")]);
+    let settings = sppm_settings(&scene, 3_000);
+    let radii = settings.radii(0..6);
+    let render = |threads: usize, a: u64, b: u64| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| render_sppm_iterations(&scene, 5, &settings, a..b, &radii[a as usize..b as usize]))
+    };
+    let whole = render(2, 0, 6);
+    let mut merged = render(1, 4, 6);
+    merged.add(&render(2, 0, 4)).unwrap();
+    assert_eq!(whole, merged);
+    assert!(whole.sums.iter().any(|s| s[0] > 0));
+}
