@@ -192,6 +192,39 @@ fn nonsense_values() {
 }
 
 #[test]
+fn bad_media() {
+    expect_error(
+        &scene_text(
+            "<medium type=\"homogeneous\" id=\"m\"><phase type=\"hg\"><float name=\"g\" value=\"1.5\"/></phase></medium>",
+            FILM,
+        ),
+        8,
+        "g must lie strictly between -1 and 1",
+    );
+    expect_error(
+        &scene_text("<medium type=\"heterogeneous\" id=\"m\"/>", FILM),
+        8,
+        "only homogeneous media",
+    );
+    expect_error(
+        &scene_text(
+            "<medium type=\"homogeneous\" id=\"m\"/><shape type=\"sphere\"><ref name=\"inside\" id=\"m\"/></shape>",
+            FILM,
+        ),
+        8,
+        "name=\"interior\"",
+    );
+    expect_error(
+        &scene_text(
+            "<emitter type=\"beam\"><float name=\"radius\" value=\"0\"/></emitter>",
+            FILM,
+        ),
+        8,
+        "must be positive",
+    );
+}
+
+#[test]
 fn zero_size_film() {
     let film = r#"<integer name="width" value="0"/><integer name="height" value="8"/>"#;
     expect_error(&scene_text("", film), 4, "width must be between 1 and 65536");
@@ -210,7 +243,12 @@ fn missing_scene_file() {
 
 #[test]
 fn every_shipped_scene_loads() {
-    for dir in [photonfarm_tests::refs_dir(), photonfarm_tests::scenes_dir()] {
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    for dir in [
+        photonfarm_tests::refs_dir(),
+        photonfarm_tests::scenes_dir(),
+        shipped,
+    ] {
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();
             if path.extension().is_some_and(|e| e == "xml") {
