@@ -24,6 +24,51 @@ pub enum Command {
     Serve(ServeArgs),
     /// Submit a scene to a coordinator; optionally wait and download the image.
     Submit(SubmitArgs),
+    /// Chart error against render time for several methods or settings.
+    Converge(ConvergeArgs),
+}
+
+/// `coordinator converge`.
+#[derive(Debug, clap::Args)]
+pub struct ConvergeArgs {
+    /// The Mitsuba 3 XML scene file.
+    pub scene: PathBuf,
+    /// Reference image (EXR) of the same resolution.
+    #[arg(long)]
+    pub reference: PathBuf,
+    /// Methods to compare, comma-separated: path, sppm.
+    #[arg(long, default_value = "path,sppm")]
+    pub methods: String,
+    /// Render time per line, seconds.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    pub time_limit: f64,
+    /// Where to write convergence.csv, convergence.png and convergence.svg.
+    #[arg(long, default_value = "convergence")]
+    pub out_dir: PathBuf,
+    /// SPPM alpha; several comma-separated values sweep it (one line each).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub alpha: Vec<f64>,
+    /// SPPM initial radius; several comma-separated values sweep it (one line each).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub radius: Vec<f32>,
+    /// SPPM photons per iteration.
+    #[arg(long)]
+    pub photons: Option<u64>,
+    /// SPPM cone filter k.
+    #[arg(long)]
+    pub k: Option<f32>,
+    /// SPPM initial volume radius over the surface one.
+    #[arg(long)]
+    pub volume_radius_ratio: Option<f32>,
+    /// Seed of every random number.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Render threads (default: one per core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Override a scene parameter; repeatable.
+    #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub define: Vec<(String, String)>,
 }
 
 /// The rendering method.
@@ -204,5 +249,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => crate::render_command::run(&args),
         Command::Serve(args) => crate::serve_command::run(args),
         Command::Submit(args) => crate::client::run_submit(&args),
+        Command::Converge(args) => crate::converge::run(&args),
     }
 }

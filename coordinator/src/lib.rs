@@ -7,6 +7,7 @@ pub mod accumulator;
 pub mod api;
 pub mod cli;
 pub mod client;
+pub mod converge;
 pub mod farm;
 pub mod logging;
 pub mod progress;

@@ -119,6 +119,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             film.nonfinite
         );
     }
+    if film.sums.iter().all(|s| *s == [0; 3]) && !scene.lights.is_empty() {
+        eprintln!(
+            "warning: the image is black: no light reaches the camera (are all lights enclosed, \
+             facing away, or outside the view's reach?)"
+        );
+    }
     if let Some(e) = checkpoint_error {
         eprintln!("warning: checkpoints stopped: {e}");
     }

@@ -1,0 +1,320 @@
+//! `coordinator converge`: error against time, per method, as a CSV and a log-log chart.
+//!
+//! Each line (a method, or one value of a swept SPPM setting) renders for the same time
+//! budget; at geometrically spaced moments (every √2 of render time, from 0.25 s) the image so
+//! far is compared with the reference. Comparison time is not counted as render time.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use photonfarm::color::Rgb;
+use photonfarm::film::{FilmSum, read_image};
+use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
+use photonfarm::render::{RenderSettings, render_passes};
+use photonfarm::scene::Scene;
+use plotters::prelude::*;
+
+use crate::cli::ConvergeArgs;
+
+/// One measurement.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// The line: method and swept setting.
+    pub line: String,
+    /// Render time so far.
+    pub seconds: f64,
+    /// Passes (spp or iterations) so far.
+    pub passes: u64,
+    /// Root mean squared error against the reference.
+    pub rmse: f64,
+    /// The largest relative error of a channel mean.
+    pub worst_mean_error: f64,
+}
+
+/// RMSE and worst relative channel-mean error of `img` against `reference`.
+pub fn errors(img: &[Rgb], reference: &[Rgb]) -> (f64, f64) {
+    let (mut se, mut m, mut r) = (0.0f64, [0.0f64; 3], [0.0f64; 3]);
+    for (a, b) in img.iter().zip(reference) {
+        for c in 0..3 {
+            let d = (a[c] - b[c]) as f64;
+            se += d * d;
+            m[c] += a[c] as f64;
+            r[c] += b[c] as f64;
+        }
+    }
+    let worst = (0..3)
+        .filter(|&c| r[c] > 0.0)
+        .map(|c| (m[c] - r[c]).abs() / r[c])
+        .fold(0.0, f64::max);
+    ((se / (3 * img.len()) as f64).sqrt(), worst)
+}
+
+/// Runs the command.
+pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
+    if !(args.time_limit > 0.0 && args.time_limit.is_finite()) {
+        bail!("--time-limit must be a positive number of seconds");
+    }
+    let lines = plan_lines(args)?;
+    let (rw, rh, reference) =
+        read_image(&args.reference).with_context(|| format!("cannot read {}", args.reference.display()))?;
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("cannot create {}", args.out_dir.display()))?;
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let mut rows = Vec::new();
+    for (name, settings) in &lines {
+        let scene = Scene::load(&args.scene, &settings.defines)?;
+        if (scene.width(), scene.height()) != (rw, rh) {
+            bail!(
+                "the reference is {rw}x{rh} but the scene renders {}x{}: set the resolution with -D",
+                scene.width(),
+                scene.height()
+            );
+        }
+        let resolved = settings.resolve(&scene, true)?;
+        eprintln!("{name}: rendering for {:.0} s", args.time_limit);
+        let line_rows = measure(
+            &scene,
+            &resolved.render,
+            &reference,
+            name,
+            Duration::from_secs_f64(args.time_limit),
+            &pool,
+        );
+        if let Some(last) = line_rows.last() {
+            eprintln!(
+                "{name}: {} passes in {:.1} s, RMSE {:.4}, worst channel mean error {:.2}%",
+                last.passes,
+                last.seconds,
+                last.rmse,
+                100.0 * last.worst_mean_error
+            );
+        }
+        rows.extend(line_rows);
+    }
+    let csv = args.out_dir.join("convergence.csv");
+    write_csv(&csv, &rows)?;
+    let title = format!(
+        "{} — RMSE against render time ({threads} threads)",
+        args.scene
+            .file_name()
+            .map(|n| n.to_string_lossy())
+            .unwrap_or_default()
+    );
+    chart(
+        &args.out_dir.join("convergence.png"),
+        &args.out_dir.join("convergence.svg"),
+        &title,
+        &rows,
+    )?;
+    eprintln!("wrote {}, convergence.png and convergence.svg", csv.display());
+    Ok(())
+}
+
+/// The lines to render: one per method, or one per value of a swept SPPM setting.
+fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>> {
+    let sweeps = [("alpha", args.alpha.len()), ("radius", args.radius.len())];
+    if sweeps.iter().filter(|(_, n)| *n > 1).count() > 1 {
+        bail!("sweep one setting at a time (--alpha or --radius with several values)");
+    }
+    let base = JobSettings {
+        photons: args.photons,
+        k: args.k,
+        volume_radius_ratio: args.volume_radius_ratio,
+        defines: args.define.clone(),
+        seed: args.seed,
+        ..JobSettings::default()
+    };
+    let mut lines = Vec::new();
+    for m in args.methods.split(',').map(str::trim) {
+        match m {
+            // SPPM's settings do not apply to the path tracer's line.
+            "path" => lines.push((
+                "path".to_string(),
+                JobSettings {
+                    integrator: JobIntegrator::Path,
+                    photons: None,
+                    k: None,
+                    volume_radius_ratio: None,
+                    ..base.clone()
+                },
+            )),
+            "sppm" => {
+                let alphas: Vec<Option<f64>> = if args.alpha.is_empty() {
+                    vec![None]
+                } else {
+                    args.alpha.iter().map(|a| Some(*a)).collect()
+                };
+                let radii: Vec<Option<f32>> = if args.radius.is_empty() {
+                    vec![None]
+                } else {
+                    args.radius.iter().map(|r| Some(*r)).collect()
+                };
+                for alpha in &alphas {
+                    for radius in &radii {
+                        let mut name = "sppm".to_string();
+                        if alphas.len() > 1 {
+                            name.push_str(&format!(" alpha={}", alpha.unwrap_or_default()));
+                        }
+                        if radii.len() > 1 {
+                            name.push_str(&format!(" radius={}", radius.unwrap_or_default()));
+                        }
+                        lines.push((
+                            name,
+                            JobSettings {
+                                integrator: JobIntegrator::Sppm,
+                                alpha: *alpha,
+                                radius: *radius,
+                                ..base.clone()
+                            },
+                        ));
+                    }
+                }
+            }
+            other => bail!("unknown method \"{other}\" in --methods (path, sppm)"),
+        }
+    }
+    Ok(lines)
+}
+
+/// Renders until the budget is spent, measuring at √2-spaced moments of render time.
+fn measure(
+    scene: &Scene,
+    settings: &RenderSettings,
+    reference: &[Rgb],
+    name: &str,
+    budget: Duration,
+    pool: &rayon::ThreadPool,
+) -> Vec<Row> {
+    let mut film = FilmSum::new(scene.width(), scene.height());
+    let mut render_time = Duration::ZERO;
+    let mut next = Duration::from_millis(250).min(budget);
+    let mut chunk = 1u64;
+    let mut rows = Vec::new();
+    loop {
+        let start = Instant::now();
+        let part = pool.install(|| render_passes(scene, settings, film.passes..film.passes + chunk));
+        render_time += start.elapsed();
+        film.add(&part).expect("same scene, same size");
+        if render_time >= next || render_time >= budget {
+            let (rmse, worst) = errors(&film.image().expect("passes were rendered"), reference);
+            rows.push(Row {
+                line: name.to_string(),
+                seconds: render_time.as_secs_f64(),
+                passes: film.passes,
+                rmse,
+                worst_mean_error: worst,
+            });
+            while next <= render_time {
+                next = next.mul_f64(std::f64::consts::SQRT_2);
+            }
+            next = next.min(budget);
+        }
+        if render_time >= budget {
+            return rows;
+        }
+        // Aim the next chunk at the next measurement.
+        let per_pass = render_time.as_secs_f64() / film.passes as f64;
+        chunk =
+            (((next - render_time.min(next)).as_secs_f64() / per_pass.max(1e-9)) as u64).clamp(1, 1 << 16);
+    }
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
+    let mut out = String::from("method,seconds,passes,rmse,worst_channel_mean_error\n");
+    for r in rows {
+        out.push_str(&format!(
+            "{},{:.4},{},{:.6e},{:.6e}\n",
+            r.line, r.seconds, r.passes, r.rmse, r.worst_mean_error
+        ));
+    }
+    std::fs::write(path, out).with_context(|| format!("cannot write {}", path.display()))
+}
+
+const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+
+fn chart(png: &Path, svg: &Path, title: &str, rows: &[Row]) -> anyhow::Result<()> {
+    // A font that ships with the program: the chart looks the same on every machine.
+    static REGISTERED: std::sync::Once = std::sync::Once::new();
+    REGISTERED.call_once(|| {
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+    {
+        let root = BitMapBackend::new(png, (1000, 680)).into_drawing_area();
+        draw(&root, title, rows)?;
+        root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    let root = SVGBackend::new(svg, (1000, 680)).into_drawing_area();
+    draw(&root, title, rows)?;
+    root.present().map_err(|e| anyhow::anyhow!("{e}"))?;
+    Ok(())
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    rows: &[Row],
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("cannot draw the chart: {e:?}");
+    root.fill(&WHITE).map_err(err)?;
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for r in rows.iter().filter(|r| r.rmse > 0.0) {
+        x0 = x0.min(r.seconds);
+        x1 = x1.max(r.seconds);
+        y0 = y0.min(r.rmse);
+        y1 = y1.max(r.rmse);
+    }
+    if x0 > x1 {
+        (x0, x1, y0, y1) = (0.1, 1.0, 0.01, 0.1);
+    }
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 24))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(
+            (x0 * 0.8..x1 * 1.25).log_scale(),
+            (y0 * 0.8..y1 * 1.25).log_scale(),
+        )
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("render time (s)")
+        .y_desc("RMSE against the reference")
+        .label_style(("sans-serif", 16))
+        .axis_desc_style(("sans-serif", 18))
+        .draw()
+        .map_err(err)?;
+    let mut names: Vec<&str> = rows.iter().map(|r| r.line.as_str()).collect();
+    names.dedup();
+    for (i, name) in names.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.line == *name && r.rmse > 0.0)
+            .map(|r| (r.seconds, r.rmse))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(3)))
+            .map_err(err)?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3)));
+        chart
+            .draw_series(pts.into_iter().map(|p| Circle::new(p, 4, color.filled())))
+            .map_err(err)?;
+    }
+    chart
+        .configure_series_labels()
+        .label_font(("sans-serif", 18))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
