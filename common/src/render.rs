@@ -4,7 +4,6 @@
 //! the sum of a pass range is the same whichever thread, machine or batch renders it.
 
 use std::ops::Range;
-use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
@@ -146,73 +145,6 @@ fn add_pixel_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32
         film.nonfinite += nonfinite;
     }
     film.passes += 1;
-}
-
-/// When to stop a progressive render.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Budget {
-    /// Total passes; None for no limit (then a time limit is needed).
-    pub passes: Option<u64>,
-    /// Wall-clock limit: whole passes are rendered until it is reached.
-    pub time_limit: Option<Duration>,
-    /// Chunks end on multiples of this, so that a checkpoint can be written there.
-    pub checkpoint_every: Option<u64>,
-}
-
-/// Where a progressive render stands.
-#[derive(Clone, Copy, Debug)]
-pub struct Progress {
-    /// Passes finished.
-    pub done: u64,
-    /// Passes planned, if known.
-    pub total: Option<u64>,
-    /// Time since the start.
-    pub elapsed: Duration,
-}
-
-/// Renders passes in chunks from 0 until the budget is spent, reporting after each chunk.
-/// At least one pass is always rendered.
-pub fn render_progressive(
-    scene: &Scene,
-    settings: &RenderSettings,
-    budget: Budget,
-    mut on_progress: impl FnMut(&Progress, &FilmSum),
-) -> FilmSum {
-    let start = Instant::now();
-    let mut film = FilmSum::new(scene.width(), scene.height());
-    let mut chunk = 1u64;
-    loop {
-        let remaining = budget.passes.map(|t| t - film.passes);
-        let mut chunk_now = remaining.map_or(chunk, |r| chunk.min(r));
-        if let Some(every) = budget.checkpoint_every.filter(|&e| e > 0) {
-            chunk_now = chunk_now.min(every - film.passes % every);
-        }
-        let part = render_passes(scene, settings, film.passes..film.passes + chunk_now);
-        film.add(&part).expect("same scene, same size");
-        let elapsed = start.elapsed();
-        on_progress(
-            &Progress {
-                done: film.passes,
-                total: budget.passes,
-                elapsed,
-            },
-            &film,
-        );
-        if budget.passes.is_some_and(|t| film.passes >= t) {
-            break;
-        }
-        // Aim for about half a second per chunk, so progress and the time limit stay responsive.
-        let per_pass = elapsed.as_secs_f64() / film.passes as f64;
-        let mut next = (0.5 / per_pass.max(1e-9)) as u64;
-        if let Some(limit) = budget.time_limit {
-            if elapsed >= limit {
-                break;
-            }
-            next = next.min(((limit - elapsed).as_secs_f64() / per_pass.max(1e-9)) as u64);
-        }
-        chunk = next.clamp(1, 1 << 20);
-    }
-    film
 }
 
 #[cfg(test)]

@@ -114,6 +114,9 @@ pub struct Farm {
     scheduler: Scheduler,
     jobs: BTreeMap<u64, JobEntry>,
     epoch: Instant,
+    /// A lease expires this long after its last heartbeat.
+    lease_timeout_ms: u64,
+    /// Workers heartbeat four times per timeout, so one lost heartbeat never costs a lease.
     heartbeat_ms: u64,
     default_checkpoint: u64,
 }
@@ -183,13 +186,13 @@ impl Farm {
                 },
             );
         }
-        let heartbeat_ms = (config.scheduler.lease_timeout_ms / 4).max(50);
         Ok(Farm {
             store,
             scheduler,
             jobs,
             epoch: Instant::now(),
-            heartbeat_ms,
+            lease_timeout_ms: config.scheduler.lease_timeout_ms,
+            heartbeat_ms: (config.scheduler.lease_timeout_ms / 4).max(10),
             default_checkpoint: config.default_checkpoint,
         })
     }
@@ -283,15 +286,11 @@ impl Farm {
             bundle: job.bundle.clone(),
             scene: job.scene.clone(),
             defines: job.defines.clone(),
-            deadline_ms: self.scheduler_timeout(),
+            deadline_ms: self.lease_timeout_ms,
             heartbeat_ms: self.heartbeat_ms,
         };
         self.persist_progress(g.job_id)?;
         Ok(Some(lease))
-    }
-
-    fn scheduler_timeout(&self) -> u64 {
-        self.heartbeat_ms * 4
     }
 
     /// Extends a lease.

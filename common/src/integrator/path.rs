@@ -79,12 +79,10 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
         if bsdf.is_null() {
-            crossings += 1;
-            if crossings > 1024 {
+            let Some((next, entered)) = scene.cross_boundary(&sp, ray.d, medium, &mut crossings) else {
                 break;
-            }
-            medium = shape.medium_after(ray.d, sp.ng, medium);
-            ray = Scene::spawn_ray(&sp, ray.d);
+            };
+            (ray, medium) = (next, entered);
             continue;
         }
         let wo = -ray.d;

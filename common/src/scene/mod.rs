@@ -143,6 +143,26 @@ impl Scene {
         Ray::new(offset_ray_origin(sp.p, sp.p_err, sp.ng, w), w)
     }
 
+    /// Continues a path across a null surface (a medium boundary) at `sp`: the ray beyond it and
+    /// the medium it enters. `crossings` counts the path's crossings; None once there have been
+    /// too many (a path trapped between coincident boundaries), which ends the path.
+    pub fn cross_boundary(
+        &self,
+        sp: &SurfacePoint,
+        d: Vec3A,
+        medium: Option<u32>,
+        crossings: &mut u32,
+    ) -> Option<(Ray, Option<u32>)> {
+        /// Boundaries one path may cross: far more than any scene nests, bounded all the same.
+        const MAX_CROSSINGS: u32 = 1024;
+        *crossings += 1;
+        if *crossings > MAX_CROSSINGS {
+            return None;
+        }
+        let shape = &self.shapes[sp.shape as usize];
+        Some((Self::spawn_ray(sp, d), shape.medium_after(d, sp.ng, medium)))
+    }
+
     /// Whether nothing blocks the segment from `sp` to the sampled light point.
     pub fn unoccluded(&self, sp: &SurfacePoint, ls: &LightSample) -> bool {
         self.transmittance(sp, ls, None) != crate::color::Rgb::ZERO

@@ -76,12 +76,10 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
         if bsdf.is_null() {
-            crossings += 1;
-            if crossings > 1024 {
+            let Some((next, entered)) = scene.cross_boundary(&sp, ray.d, medium, &mut crossings) else {
                 break;
-            }
-            medium = shape.medium_after(ray.d, sp.ng, medium);
-            ray = Scene::spawn_ray(&sp, ray.d);
+            };
+            (ray, medium) = (next, entered);
             continue;
         }
         // Emitters seen directly, through specular bounces (full weight: light sampling cannot

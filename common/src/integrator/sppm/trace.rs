@@ -113,12 +113,10 @@ fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u3
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
         if bsdf.is_null() {
-            crossings += 1;
-            if crossings > 1024 {
+            let Some((next, entered)) = scene.cross_boundary(&sp, ray.d, medium, &mut crossings) else {
                 return;
-            }
-            medium = shape.medium_after(ray.d, sp.ng, medium);
-            ray = Scene::spawn_ray(&sp, ray.d);
+            };
+            (ray, medium) = (next, entered);
             continue;
         }
         let wi = -ray.d;
