@@ -260,4 +260,45 @@ async fn bad_requests_get_the_right_4xx_and_the_service_keeps_serving() {
     error_of(&v);
     let (s, v) = api.call(reqwest::Method::GET, "/healthz", vec![]).await;
     assert_eq!(s, StatusCode::OK, "{v}");
+
+    // Cancelling: the job says so, its lease is dead, and no more work is handed out for it.
+    let job = v_id(&api).await;
+    let (s, lease) = api
+        .call(
+            reqwest::Method::POST,
+            "/api/lease",
+            br#"{"worker": "w2", "threads": 1}"#.to_vec(),
+        )
+        .await;
+    assert_eq!(s, StatusCode::OK, "{lease}");
+    let (s, v) = api
+        .call(reqwest::Method::DELETE, &format!("/api/jobs/{job}"), vec![])
+        .await;
+    assert_eq!(s, StatusCode::OK, "{v}");
+    assert_eq!(v["state"], "cancelled");
+    let lease_id = lease["lease_id"].as_u64().unwrap();
+    let (s, _) = api
+        .call(
+            reqwest::Method::POST,
+            &format!("/api/leases/{lease_id}/heartbeat"),
+            vec![],
+        )
+        .await;
+    assert_eq!(s, StatusCode::CONFLICT, "a cancelled job's lease is void");
+    let (s, _) = api
+        .call(
+            reqwest::Method::GET,
+            &format!("/api/jobs/{job}/image.exr"),
+            vec![],
+        )
+        .await;
+    assert_eq!(s, StatusCode::NOT_FOUND, "nothing was rendered");
+}
+
+/// The newest job's id.
+async fn v_id(api: &Api) -> u64 {
+    let (_, v) = api.call(reqwest::Method::GET, "/api/jobs", vec![]).await;
+    v["jobs"].as_array().unwrap().last().unwrap()["id"]
+        .as_u64()
+        .unwrap()
 }

@@ -191,3 +191,44 @@ fn a_restarted_coordinator_resumes_the_job() {
         "bytes differ after a restart"
     );
 }
+
+/// SIGTERM: the worker finishes the batch under way, delivers it, and exits cleanly.
+#[test]
+fn a_worker_stopped_with_sigterm_delivers_its_batch_and_exits() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &["--batch-seconds", "1"]);
+    let mut w = worker(&url, "polite", dir.path());
+    let id = submit(&url);
+    wait_until("the worker to hold a batch", Duration::from_secs(60), || {
+        status(&url, id).is_some_and(|s| {
+            s["iterations_done"].as_u64().unwrap_or(0) >= 1 && s["workers"] == serde_json::json!(["polite"])
+        })
+    });
+    let before = status(&url, id).unwrap()["iterations_done"].as_u64().unwrap();
+    let pid = w.0.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let start = Instant::now();
+    let exit = loop {
+        if let Some(e) = w.0.try_wait().unwrap() {
+            break e;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the worker did not exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(exit.success(), "SIGTERM is a clean exit: {exit:?}");
+    let after = status(&url, id).unwrap();
+    assert!(
+        after["iterations_done"].as_u64().unwrap() > before,
+        "the batch under way was delivered: {before} then {after}"
+    );
+    assert_eq!(after["workers"], serde_json::json!([]), "no lease left behind");
+}
