@@ -4,6 +4,7 @@
 //! homogeneous media, medium boundaries crossed without a bounce.
 
 use super::direct::{self, PreviousBounce};
+use super::russian_roulette;
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::geometry::{Frame, Ray};
@@ -63,7 +64,7 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
                     prev = Some(PreviousBounce { p, pdf, delta: false });
                     ray = Ray::new(p, d);
                     depth += 1;
-                    if !russian_roulette(&mut beta, eta, depth, settings, sampler) {
+                    if !russian_roulette(&mut beta, eta, depth, settings.rr_depth, sampler) {
                         break;
                     }
                     continue;
@@ -124,28 +125,9 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, mut ray: Ray, sampler: &
         medium = shape.medium_after(wi, sp.ng, medium);
         ray = Scene::spawn_ray(&sp, wi);
         depth += 1;
-        if !russian_roulette(&mut beta, eta, depth, settings, sampler) {
+        if !russian_roulette(&mut beta, eta, depth, settings.rr_depth, sampler) {
             break;
         }
     }
     l
-}
-
-/// Mitsuba's Russian roulette: from `rr_depth` on, survival by throughput (corrected for
-/// refraction); false when the path ends.
-fn russian_roulette(
-    beta: &mut Rgb,
-    eta: f32,
-    depth: u32,
-    settings: &PathSettings,
-    sampler: &mut Sampler,
-) -> bool {
-    if depth > settings.rr_depth {
-        let q = (beta.max_element() * eta * eta).min(0.95);
-        if sampler.next_1d() >= q {
-            return false;
-        }
-        *beta /= q;
-    }
-    *beta != Rgb::ZERO
 }

@@ -15,6 +15,7 @@ use crate::bsdf::{Bsdf, TransportMode};
 use crate::color::Rgb;
 use crate::geometry::{Frame, Ray, SurfacePoint};
 use crate::integrator::direct::{self, PreviousBounce};
+use crate::integrator::russian_roulette;
 use crate::medium::Flight;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -127,12 +128,8 @@ pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> 
         medium = shape.medium_after(d, sp.ng, medium);
         ray = Scene::spawn_ray(&sp, d);
         depth += 1;
-        if depth > ctx.rr_depth {
-            let q = (beta.max_element() * eta * eta).min(0.95);
-            if sampler.next_1d() >= q {
-                break;
-            }
-            beta /= q;
+        if !russian_roulette(&mut beta, eta, depth, ctx.rr_depth, sampler) {
+            break;
         }
     }
     l
