@@ -342,16 +342,16 @@ impl Farm {
         if finished {
             job.finished = Some(Instant::now());
         }
+        // The latest checkpoint: the whole prefix once the job is finished.
         let latest = if finished {
-            Some(job.acc.prefix().clone())
+            Some(job.acc.prefix())
         } else {
-            checkpoints.last().cloned()
+            checkpoints.last()
         };
         if let Some(image) = latest {
             // The prefix file first: the checkpoint images must never be ahead of it.
-            let prefix = job.acc.prefix().clone();
-            self.store.save_prefix(g.job_id, &prefix)?;
-            self.store.write_images(g.job_id, &image)?;
+            self.store.save_prefix(g.job_id, job.acc.prefix())?;
+            self.store.write_images(g.job_id, image)?;
         }
         self.persist_progress(g.job_id)
     }
