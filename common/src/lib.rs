@@ -14,6 +14,8 @@ pub mod integrator;
 pub mod job;
 pub mod light;
 pub mod medium;
+#[cfg(feature = "process")]
+pub mod process;
 pub mod protocol;
 pub mod render;
 pub mod sampling;

@@ -9,7 +9,6 @@ pub mod cli;
 pub mod client;
 pub mod converge;
 pub mod farm;
-pub mod logging;
 pub mod progress;
 pub mod render_command;
 pub mod scheduler;

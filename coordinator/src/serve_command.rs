@@ -5,7 +5,7 @@ use anyhow::{Context, bail};
 use crate::cli::ServeArgs;
 use crate::farm::FarmConfig;
 use crate::scheduler::SchedulerConfig;
-use crate::service::{ServeConfig, run as serve, shutdown_signal};
+use crate::service::{ServeConfig, run as serve};
 
 /// Runs the service until ctrl-c or SIGTERM.
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
@@ -18,7 +18,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     if args.max_upload_mb == 0 || args.checkpoint_every == 0 {
         bail!("--max-upload-mb and --checkpoint-every must be at least 1");
     }
-    crate::logging::init();
+    photonfarm::process::init_logging();
     // An empty PHOTONFARM_TOKEN (as docker compose passes an unset variable) means no token.
     let token = args.token.clone().filter(|t| !t.is_empty());
     if token.is_none() {
@@ -42,6 +42,10 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         let listener = tokio::net::TcpListener::bind(&args.bind)
             .await
             .with_context(|| format!("cannot listen on {}", args.bind))?;
-        serve(listener, config, shutdown_signal()).await
+        let shutdown = async {
+            photonfarm::process::shutdown_signal().await;
+            tracing::info!("shutting down");
+        };
+        serve(listener, config, shutdown).await
     })
 }
