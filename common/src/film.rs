@@ -13,14 +13,23 @@ use crate::color::{Rgb, srgb_encode};
 pub const FIXED_SCALE: f64 = (1u64 << 24) as f64;
 
 /// Summed samples of a range of passes.
+///
+/// With a box filter every sample lands in its own pixel with weight one, so a pixel's weight is
+/// its pass count and `weights` stays empty: such scenes send and store 24 bytes a pixel. Wider
+/// filters spread a sample over its neighbours (as Mitsuba's film does), and each pixel keeps the
+/// exact sum of the weights it received, by which its sum is divided.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FilmSum {
     /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
-    /// Per pixel, per channel: the sum of samples in units of 1 / [`FIXED_SCALE`].
+    /// Per pixel, per channel: the sum of (filter-weighted) samples in units of 1 /
+    /// [`FIXED_SCALE`].
     pub sums: Vec<[i64; 3]>,
+    /// Per pixel: the sum of filter weights in units of 1 / [`FIXED_SCALE`]; empty when every
+    /// pixel's weight is its pass count (box filter).
+    pub weights: Vec<i64>,
     /// Passes summed (each pass is one sample per pixel).
     pub passes: u64,
     /// Samples that were NaN or infinite and were left out (counted so they can be reported).
@@ -59,6 +68,14 @@ pub fn to_fixed(v: Rgb) -> Option<[i64; 3]> {
     Some([v.x, v.y, v.z].map(|c| (c.max(0.0) as f64 * FIXED_SCALE).round() as i64))
 }
 
+/// Adds one pixel's fixed-point channels to another's.
+#[inline]
+pub fn add_fixed(acc: &mut [i64; 3], v: &[i64; 3]) {
+    for (a, b) in acc.iter_mut().zip(v) {
+        *a = a.saturating_add(*b);
+    }
+}
+
 impl FilmSum {
     /// An empty sum.
     pub fn new(width: u32, height: u32) -> FilmSum {
@@ -66,6 +83,7 @@ impl FilmSum {
             width,
             height,
             sums: vec![[0; 3]; width as usize * height as usize],
+            weights: Vec::new(),
             passes: 0,
             nonfinite: 0,
         }
@@ -82,8 +100,19 @@ impl FilmSum {
             ));
         }
         for (a, b) in self.sums.iter_mut().zip(&other.sums) {
-            for c in 0..3 {
-                a[c] = a[c].saturating_add(b[c]);
+            add_fixed(a, b);
+        }
+        // A box-filtered sum is a weighted one whose weights are its pass counts.
+        if !other.weights.is_empty() || !self.weights.is_empty() {
+            self.make_weighted();
+            let implicit = vec![other.box_weight(); self.weights.len()];
+            let theirs = if other.weights.is_empty() {
+                &implicit
+            } else {
+                &other.weights
+            };
+            for (a, b) in self.weights.iter_mut().zip(theirs) {
+                *a = a.saturating_add(*b);
             }
         }
         self.passes += other.passes;
@@ -91,16 +120,35 @@ impl FilmSum {
         Ok(())
     }
 
-    /// The mean of the passes: the image.
+    /// The weight of every pixel of a box-filtered sum: one per pass.
+    fn box_weight(&self) -> i64 {
+        (self.passes as f64 * FIXED_SCALE) as i64
+    }
+
+    /// Gives every pixel an explicit weight (its pass count, if it had none).
+    pub fn make_weighted(&mut self) {
+        if self.weights.is_empty() {
+            self.weights = vec![self.box_weight(); self.sums.len()];
+        }
+    }
+
+    /// The image: each pixel's weighted mean of its samples (a box filter's is the mean of the
+    /// passes). A pixel that received no weight is black.
     pub fn image(&self) -> Result<Vec<Rgb>, FilmError> {
         if self.passes == 0 {
             return Err(FilmError::Empty);
         }
-        let scale = 1.0 / (FIXED_SCALE * self.passes as f64);
+        let pass_scale = 1.0 / (FIXED_SCALE * self.passes as f64);
         Ok(self
             .sums
             .iter()
-            .map(|s| {
+            .enumerate()
+            .map(|(i, s)| {
+                let scale = match self.weights.get(i) {
+                    Some(&w) if w > 0 => 1.0 / w as f64,
+                    Some(_) => 0.0,
+                    None => pass_scale,
+                };
                 Rgb::new(
                     (s[0] as f64 * scale) as f32,
                     (s[1] as f64 * scale) as f32,

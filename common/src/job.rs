@@ -6,29 +6,43 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::integrator::direct_illumination::DirectSettings;
 use crate::integrator::path::PathSettings;
 use crate::integrator::sppm::{SppmError, SppmSettings};
 use crate::render::{Method, RenderSettings};
 use crate::scene::Scene;
 
 /// The rendering method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Integrator {
     /// Path tracing.
-    #[default]
     Path,
+    /// Mitsuba's `direct`: emission and one bounce of light.
+    Direct,
     /// Progressive photon mapping.
     Sppm,
+}
+
+impl Integrator {
+    /// The method that renders a scene's `<integrator>` (already reduced by the scene loader
+    /// to `path`, `direct` or `sppm`).
+    pub fn of_scene(scene: &Scene) -> Integrator {
+        match scene.integrator.kind.as_str() {
+            "direct" => Integrator::Direct,
+            "sppm" => Integrator::Sppm,
+            _ => Integrator::Path,
+        }
+    }
 }
 
 /// What a user asks for. Unset values take the scene's, then the built-in defaults.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct JobSettings {
-    /// The method.
+    /// The method; None renders the scene's `<integrator>`.
     #[serde(default)]
-    pub integrator: Integrator,
+    pub integrator: Option<Integrator>,
     /// Passes: samples per pixel for `path`, iterations for `sppm`.
     #[serde(default)]
     pub passes: Option<u64>,
@@ -94,8 +108,9 @@ impl JobSettings {
             return Err(JobError::Zero("the checkpoint interval"));
         }
         let mut warnings = Vec::new();
-        let (method, declared) = match self.integrator {
-            Integrator::Path => {
+        let integrator = self.integrator.unwrap_or_else(|| Integrator::of_scene(scene));
+        let (method, declared) = match integrator {
+            Integrator::Path | Integrator::Direct => {
                 for (name, given) in [
                     ("photons", self.photons.is_some()),
                     ("radius", self.radius.is_some()),
@@ -107,7 +122,12 @@ impl JobSettings {
                         return Err(JobError::NotForPath(name));
                     }
                 }
-                (Method::Path(PathSettings::from_scene(scene)), None)
+                let method = if integrator == Integrator::Path {
+                    Method::Path(PathSettings::from_scene(scene))
+                } else {
+                    Method::Direct(DirectSettings::from_scene(scene))
+                };
+                (method, None)
             }
             Integrator::Sppm => {
                 let (mut s, w) = SppmSettings::from_scene(scene);

@@ -7,18 +7,27 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
+use glam::Vec2;
+
 use crate::color::Rgb;
-use crate::film::{FilmSum, to_fixed};
+use crate::film::{FilmSum, add_fixed, to_fixed};
+use crate::geometry::Ray;
+use crate::integrator::direct_illumination::{self, DirectSettings};
 use crate::integrator::path::{self, PathSettings};
 use crate::integrator::sppm::{self, GatherContext, PhotonBuffers, PhotonMap, SppmSettings};
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
+
+mod splat;
 
 /// The rendering method and its parameters.
 #[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
 pub enum Method {
     /// Path tracing: a pass is one path per pixel.
     Path(PathSettings),
+    /// Mitsuba's `direct` integrator: a pass is one camera ray per pixel, shaded at its first
+    /// surface only.
+    Direct(DirectSettings),
     /// Progressive photon mapping: a pass is one iteration (a photon pass and one camera path
     /// per pixel).
     Sppm(SppmSettings),
@@ -37,19 +46,12 @@ pub struct RenderSettings {
 /// settings' schedule; [`render_sppm_iterations`] takes them from the caller instead.
 pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64>) -> FilmSum {
     match &settings.method {
-        Method::Path(p) => {
-            let mut film = FilmSum::new(scene.width(), scene.height());
-            for pass in passes {
-                add_pixel_samples(scene, &mut film, |x, y, pixel| {
-                    let mut sampler = Sampler::new(settings.seed, Stream::Camera, pass, pixel);
-                    let ray = scene
-                        .camera
-                        .generate_ray(x, y, sampler.next_2d(), sampler.next_2d());
-                    path::radiance(scene, p, ray, &mut sampler)
-                });
-            }
-            film
-        }
+        Method::Path(p) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
+            path::radiance(scene, p, ray, sampler)
+        }),
+        Method::Direct(d) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
+            direct_illumination::radiance(scene, d, ray, sampler)
+        }),
         Method::Sppm(s) => {
             let radii = s.radii(passes.clone());
             render_sppm_iterations(scene, settings.seed, s, passes, &radii)
@@ -66,7 +68,7 @@ pub fn render_batch(
     radii: &[[f32; 2]],
 ) -> FilmSum {
     match &settings.method {
-        Method::Path(_) => render_passes(scene, settings, passes),
+        Method::Path(_) | Method::Direct(_) => render_passes(scene, settings, passes),
         Method::Sppm(s) => render_sppm_iterations(scene, settings.seed, s, passes, radii),
     }
 }
@@ -106,19 +108,55 @@ pub fn render_sppm_iterations(
             max_depth,
             rr_depth: settings.rr_depth,
         };
-        add_pixel_samples(scene, &mut film, |x, y, pixel| {
-            let mut sampler = Sampler::new(seed, Stream::Camera, iteration, pixel);
-            let ray = scene
-                .camera
-                .generate_ray(x, y, sampler.next_2d(), sampler.next_2d());
-            sppm::camera_path(&ctx, ray, &mut sampler)
+        add_pixel_samples(scene, &mut film, seed, iteration, |ray, sampler| {
+            sppm::camera_path(&ctx, ray, sampler)
         });
     }
     film
 }
 
-/// Adds one sample per pixel, computed in parallel by rows, to the film; counts one pass.
-fn add_pixel_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32, u64) -> Rgb + Sync) {
+/// Renders `passes` of a method that needs nothing but camera paths.
+fn camera_passes(
+    scene: &Scene,
+    seed: u64,
+    passes: Range<u64>,
+    radiance: impl Fn(Ray, &mut Sampler) -> Rgb + Sync,
+) -> FilmSum {
+    let mut film = FilmSum::new(scene.width(), scene.height());
+    for pass in passes {
+        add_pixel_samples(scene, &mut film, seed, pass, &radiance);
+    }
+    film
+}
+
+/// Adds one camera sample per pixel of pass `pass` to the film, in parallel; counts one pass.
+/// `radiance` follows the camera ray with the pixel's sampler, which has drawn the film and lens
+/// positions; with a box filter the sample counts for its pixel alone, otherwise it is splatted.
+fn add_pixel_samples(
+    scene: &Scene,
+    film: &mut FilmSum,
+    seed: u64,
+    pass: u64,
+    radiance: impl Fn(Ray, &mut Sampler) -> Rgb + Sync,
+) {
+    let w = scene.width();
+    let sample = |x: u32, y: u32| -> (Rgb, Vec2) {
+        let pixel = y as u64 * w as u64 + x as u64;
+        let mut sampler = Sampler::new(seed, Stream::Camera, pass, pixel);
+        let u_pixel = sampler.next_2d();
+        let ray = scene.camera.generate_ray(x, y, u_pixel, sampler.next_2d());
+        (radiance(ray, &mut sampler), u_pixel)
+    };
+    if scene.filter.is_box() {
+        add_box_samples(scene, film, sample);
+    } else {
+        splat::add_filtered_samples(scene, film, sample);
+    }
+    film.passes += 1;
+}
+
+/// Box filter: one sample per pixel, computed in parallel by rows.
+fn add_box_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32) -> (Rgb, Vec2) + Sync) {
     let w = scene.width();
     let rows: Vec<(Vec<[i64; 3]>, u64)> = (0..scene.height())
         .into_par_iter()
@@ -126,8 +164,7 @@ fn add_pixel_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32
             let mut nonfinite = 0;
             let row = (0..w)
                 .map(|x| {
-                    let pixel = y as u64 * w as u64 + x as u64;
-                    to_fixed(sample(x, y, pixel)).unwrap_or_else(|| {
+                    to_fixed(sample(x, y).0).unwrap_or_else(|| {
                         nonfinite += 1;
                         [0; 3]
                     })
@@ -137,14 +174,16 @@ fn add_pixel_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32
         })
         .collect();
     for (y, (row, nonfinite)) in rows.into_iter().enumerate() {
-        for (acc, v) in film.sums[y * w as usize..].iter_mut().zip(row) {
-            for c in 0..3 {
-                acc[c] += v[c];
-            }
+        for (acc, v) in film.sums[y * w as usize..].iter_mut().zip(&row) {
+            add_fixed(acc, v);
         }
         film.nonfinite += nonfinite;
     }
-    film.passes += 1;
+    // Keeps a weighted sum weighted: each pixel received weight one.
+    if !film.weights.is_empty() {
+        let one = crate::film::FIXED_SCALE as i64;
+        film.weights.iter_mut().for_each(|wt| *wt += one);
+    }
 }
 
 #[cfg(test)]
@@ -176,5 +215,33 @@ mod tests {
         parts.add(&render_passes(&scene, &settings, 1..4)).unwrap();
         assert_eq!(whole, parts);
         assert!(whole.sums.iter().any(|s| s[2] > 0));
+    }
+
+    /// Splatted samples (Gaussian, tent) keep the farm's contract: any split of the passes, in
+    /// any order, on any number of threads, sums to the same bytes.
+    #[test]
+    fn splatted_passes_sum_to_the_same_bytes_with_any_split_and_threads() {
+        for filter in [
+            "<rfilter type=\"gaussian\"/>",
+            "<rfilter type=\"tent\"><float name=\"radius\" value=\"1.5\"/></rfilter>",
+        ] {
+            let text = SCENE.replace("<rfilter type=\"box\"/>", filter);
+            let scene = Scene::from_str(&text, Path::new("inline.xml"), &[]).unwrap();
+            assert!(!scene.filter.is_box());
+            let settings = RenderSettings {
+                seed: 3,
+                method: Method::Path(PathSettings::from_scene(&scene)),
+            };
+            let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+            let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));
+            let mut parts = pool(2).install(|| render_passes(&scene, &settings, 2..5));
+            parts.add(&render_passes(&scene, &settings, 0..2)).unwrap();
+            assert_eq!(whole, parts);
+            assert_eq!(whole.weights.len(), 12 * 8);
+            // Every pixel received weight; a box-filtered sum added to it stays consistent.
+            assert!(whole.weights.iter().all(|&w| w > 0));
+            let img = whole.image().unwrap();
+            assert!(img.iter().all(|p| p.is_finite()) && img.iter().any(|p| p.z > 0.0));
+        }
     }
 }

@@ -76,6 +76,8 @@ pub struct ConvergeArgs {
 pub enum Integrator {
     /// Unidirectional path tracing with next-event estimation and MIS.
     Path,
+    /// Mitsuba's `direct`: emitters seen directly and one bounce of light, nothing more.
+    Direct,
     /// Stochastic progressive photon mapping (Knaus and Zwicker): caustics and light seen
     /// through glass or in mirrors.
     Sppm,
@@ -86,9 +88,10 @@ pub enum Integrator {
 pub struct JobArgs {
     /// The Mitsuba 3 XML scene file.
     pub scene: PathBuf,
-    /// Rendering method.
-    #[arg(long, value_enum, default_value = "path")]
-    pub integrator: Integrator,
+    /// Rendering method [default: the scene's <integrator>: path, volpath and ptracer render
+    /// with path, direct with direct, sppm with sppm; path if it has none].
+    #[arg(long, value_enum)]
+    pub integrator: Option<Integrator>,
     /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count
     /// (`render`: no limit when --time-limit is given).
     #[arg(long)]
@@ -131,21 +134,25 @@ pub struct JobArgs {
 impl JobArgs {
     /// The settings these flags ask for.
     pub fn settings(&self) -> anyhow::Result<JobSettings> {
-        let integrator = match self.integrator {
+        let integrator = self.integrator.map(|i| match i {
             Integrator::Path => JobIntegrator::Path,
+            Integrator::Direct => JobIntegrator::Direct,
             Integrator::Sppm => JobIntegrator::Sppm,
-        };
+        });
         let passes = match (integrator, self.spp, self.iterations) {
-            (JobIntegrator::Path, spp, None) => spp,
-            (JobIntegrator::Path, _, Some(_)) => {
+            (_, Some(_), Some(_)) => {
+                anyhow::bail!("give --spp (path, direct) or --iterations (sppm), not both")
+            }
+            (Some(JobIntegrator::Path | JobIntegrator::Direct), _, Some(_)) => {
                 anyhow::bail!("--iterations applies to --integrator sppm; use --spp")
             }
-            (JobIntegrator::Sppm, None, it) => it,
-            (JobIntegrator::Sppm, Some(_), _) => {
+            (Some(JobIntegrator::Sppm), Some(_), _) => {
                 anyhow::bail!("SPPM counts iterations: use --iterations, not --spp")
             }
+            // Without --integrator the scene decides the method; either flag counts passes.
+            (_, spp, it) => spp.or(it),
         };
-        if integrator == JobIntegrator::Path {
+        if matches!(integrator, Some(JobIntegrator::Path | JobIntegrator::Direct)) {
             for (flag, given) in [
                 ("--photons", self.photons.is_some()),
                 ("--radius", self.radius.is_some()),

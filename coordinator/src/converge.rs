@@ -135,7 +135,7 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
             "path" => lines.push((
                 "path".to_string(),
                 JobSettings {
-                    integrator: JobIntegrator::Path,
+                    integrator: Some(JobIntegrator::Path),
                     photons: None,
                     k: None,
                     volume_radius_ratio: None,
@@ -165,7 +165,7 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                         lines.push((
                             name,
                             JobSettings {
-                                integrator: JobIntegrator::Sppm,
+                                integrator: Some(JobIntegrator::Sppm),
                                 alpha: *alpha,
                                 radius: *radius,
                                 ..base.clone()

@@ -130,7 +130,7 @@ fn unix_ms() -> u64 {
 fn radii_for(render: &RenderSettings, total: u64) -> Vec<[f32; 2]> {
     match &render.method {
         Method::Sppm(s) => s.radii(0..total),
-        Method::Path(_) => Vec::new(),
+        Method::Path(_) | Method::Direct(_) => Vec::new(),
     }
 }
 
@@ -424,6 +424,7 @@ impl Farm {
             rate,
             integrator: match job.render.method {
                 Method::Path(_) => "path",
+                Method::Direct(_) => "direct",
                 Method::Sppm(_) => "sppm",
             },
             width: job.width,

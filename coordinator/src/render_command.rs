@@ -39,7 +39,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         eprintln!("warning: {w}");
     }
     let (unit, radii_schedule) = match &resolved.render.method {
-        Method::Path(_) => ("passes", None),
+        Method::Path(_) | Method::Direct(_) => ("passes", None),
         Method::Sppm(s) => {
             eprintln!(
                 "SPPM: {} photons per iteration, initial radius {:.4e} (volume {:.4e}), alpha {:.3}, k {}",

@@ -29,6 +29,10 @@ const JOB: &[&str] = &[
     "16",
     "-D",
     "res=48",
+    // Mitsuba's default filter: every sample splats into its neighbours and every pixel keeps
+    // its weight, which the farm must merge as exactly as the sums.
+    "-D",
+    "filter=gaussian",
 ];
 
 fn local_render(dir: &Path) -> Vec<u8> {

@@ -59,6 +59,24 @@ pub fn light_sample(
     u: Vec2,
     with_mis: bool,
 ) -> Rgb {
+    let bsdf_share = if with_mis { 1.0 } else { 0.0 };
+    light_sample_shared(scene, bsdf, sp, frame, wi_local, medium, u_select, u, bsdf_share)
+}
+
+/// [`light_sample`], weighted against BSDF sampling that takes `bsdf_share` times as many
+/// samples as light sampling (0: no BSDF sampling, full weight).
+#[allow(clippy::too_many_arguments)]
+pub fn light_sample_shared(
+    scene: &Scene,
+    bsdf: &Bsdf,
+    sp: &SurfacePoint,
+    frame: &Frame,
+    wi_local: Vec3A,
+    medium: Option<u32>,
+    u_select: f32,
+    u: Vec2,
+    bsdf_share: f32,
+) -> Rgb {
     let Some((_, ls)) = scene.sample_light(sp.p, u_select, u) else {
         return Rgb::ZERO;
     };
@@ -73,8 +91,8 @@ pub fn light_sample(
     if tr == Rgb::ZERO {
         return Rgb::ZERO;
     }
-    let w = if with_mis && !ls.delta {
-        mis_weight(ls.pdf, bsdf.pdf(wi_local, wl))
+    let w = if bsdf_share > 0.0 && !ls.delta {
+        mis_weight(ls.pdf, bsdf_share * bsdf.pdf(wi_local, wl))
     } else {
         1.0
     };

@@ -2,6 +2,7 @@
 //! in [`crate::render`] decides which pixels and passes.
 
 pub mod direct;
+pub mod direct_illumination;
 pub mod path;
 pub mod sppm;
 

@@ -13,6 +13,7 @@ use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
 use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Ggx, Plastic};
 use crate::camera::Camera;
 use crate::color::Rgb;
+use crate::filter::Filter;
 use crate::geometry::Frame;
 use crate::geometry::{Bvh, Primitive, Sphere, Triangle};
 use crate::light::{AreaLight, BeamLight, Light, PointLight, SpotLight};
@@ -42,6 +43,9 @@ pub(super) fn from_str(text: &str, path: &Path, defines: &[(String, String)]) ->
     Builder::new(&ctx).scene(&root)
 }
 
+/// The widest reconstruction filter, in pixels on each side of a sample's own.
+const MAX_FILTER_REACH: u32 = 8;
+
 /// Accumulates the scene while the elements are read.
 struct Builder<'a> {
     ctx: &'a Ctx,
@@ -58,6 +62,8 @@ struct Builder<'a> {
     camera_medium: Option<u32>,
     warnings: Vec<String>,
     files: Vec<std::path::PathBuf>,
+    /// The sensor's far clipping distance, checked against the scene's extent.
+    far_clip: f32,
 }
 
 impl<'a> Builder<'a> {
@@ -76,6 +82,7 @@ impl<'a> Builder<'a> {
             camera_medium: None,
             warnings: Vec::new(),
             files: Vec::new(),
+            far_clip: f32::INFINITY,
         }
     }
 
@@ -126,7 +133,7 @@ impl<'a> Builder<'a> {
         let Some(sensor) = sensor else {
             return Err(ctx.err(root, "the scene has no <sensor>"));
         };
-        let (camera, spp) = self.sensor(sensor)?;
+        let (camera, spp, filter) = self.sensor(sensor)?;
         let integrator = integrator.unwrap_or(IntegratorDecl {
             kind: "path".into(),
             max_depth: -1,
@@ -135,6 +142,25 @@ impl<'a> Builder<'a> {
         });
 
         let bvh = Bvh::build(std::mem::take(&mut self.prims));
+        let eye = camera.to_world.transform_point3a(Vec3A::ZERO);
+        let b = bvh.bounds();
+        let farthest = (0..8)
+            .map(|i| {
+                let corner = Vec3A::new(
+                    if i & 1 == 0 { b.min.x } else { b.max.x },
+                    if i & 2 == 0 { b.min.y } else { b.max.y },
+                    if i & 4 == 0 { b.min.z } else { b.max.z },
+                );
+                (corner - eye).length()
+            })
+            .fold(0.0f32, f32::max);
+        if farthest > self.far_clip {
+            self.warnings.push(format!(
+                "geometry lies up to {farthest} away but the sensor's far_clip is {}: we do not clip \
+                 far geometry, Mitsuba hides it",
+                self.far_clip
+            ));
+        }
         self.attach_area_lights(&bvh);
         if self.lights.is_empty() {
             self.warnings
@@ -162,6 +188,7 @@ impl<'a> Builder<'a> {
             camera_medium: self.camera_medium,
             light_selection,
             camera,
+            filter,
             spp,
             integrator,
             warnings: self.warnings,
@@ -186,9 +213,54 @@ impl<'a> Builder<'a> {
         }
     }
 
+    /// `<integrator>`, reduced to the method of ours that renders it: `path` (Mitsuba's `path`,
+    /// `volpath`, `volpathmis`, and `ptracer` with a warning), `direct`, or `sppm`. The wrappers
+    /// `moment` and `aov` render their first nested integrator.
     fn integrator(&mut self, el: &Element) -> Res<IntegratorDecl> {
         let p = Props::new(self.ctx, el)?;
-        let kind = p.kind()?.to_string();
+        let kind = p.kind()?;
+        if matches!(kind, "moment" | "aov") {
+            let _ = p.string("aovs")?;
+            let nested = p.objects("integrator");
+            let Some(inner) = nested.first() else {
+                return Err(self.ctx.err(
+                    el,
+                    format!("a {kind} integrator without a nested integrator renders only AOVs, which we do not write"),
+                ));
+            };
+            p.finish()?;
+            let decl = self.integrator(inner)?;
+            self.warnings.push(format!(
+                "{}:{}: <integrator type=\"{kind}\">: rendering its nested {} integrator; the {kind} outputs are not written",
+                self.ctx.file.display(),
+                el.line,
+                decl.kind
+            ));
+            return Ok(decl);
+        }
+        let method = match kind {
+            "path" | "volpath" | "volpathmis" => "path",
+            "ptracer" => {
+                self.warnings.push(format!(
+                    "{}:{}: <integrator type=\"ptracer\">: rendered with our path tracer (the same image, \
+                     different noise: a particle tracer is not implemented)",
+                    self.ctx.file.display(),
+                    el.line
+                ));
+                "path"
+            }
+            "direct" => "direct",
+            "sppm" => "sppm",
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!(
+                        "integrator type \"{other}\" is not supported (path, volpath, volpathmis, direct, ptracer, \
+                         sppm, and moment or aov around one of them)"
+                    ),
+                ));
+            }
+        };
         let max_depth = p.int("max_depth")?.unwrap_or(-1);
         if max_depth < -1 || max_depth == 0 || max_depth > i32::MAX as i64 {
             return Err(p.err_at(
@@ -203,34 +275,92 @@ impl<'a> Builder<'a> {
         if p.boolean("hide_emitters")?.unwrap_or(false) {
             return Err(p.err_at("hide_emitters", "hide_emitters=true is not supported".into()));
         }
-        // The remaining numbers belong to the method (e.g. SPPM's photon count).
+        // How Mitsuba splits its work, which does not change the image.
+        let _ = p.int("samples_per_pass")?;
+        let _ = p.int("block_size")?;
+        if kind == "volpathmis" {
+            let _ = p.boolean("use_spectral_mis")?;
+        }
+        if p.float("timeout")?.is_some_and(|t| t > 0.0) {
+            return Err(p.err_at(
+                "timeout",
+                "a render timeout is set on the command line (--time-limit), not in the scene".into(),
+            ));
+        }
         let mut params = Vec::new();
-        for c in &el.children {
-            if let (Some(name), "float" | "integer") = (c.attr("name"), c.tag.as_str())
-                && !matches!(name, "max_depth" | "rr_depth")
-                && let Some(v) = p.float(name)?
-            {
-                params.push((name.to_string(), v as f64));
+        match method {
+            "direct" => {
+                let shading = p.int("shading_samples")?;
+                let (e, b) = (p.int("emitter_samples")?, p.int("bsdf_samples")?);
+                if shading.is_some() && (e.is_some() || b.is_some()) {
+                    return Err(self.ctx.err(
+                        el,
+                        "give shading_samples, or emitter_samples and bsdf_samples, not both",
+                    ));
+                }
+                let e = e.or(shading).unwrap_or(1);
+                let b = b.or(shading).unwrap_or(1);
+                for (name, v) in [("emitter_samples", e), ("bsdf_samples", b)] {
+                    if !(0..=1024).contains(&v) {
+                        return Err(p.err_at(name, format!("{name} must lie in [0, 1024], not {v}")));
+                    }
+                }
+                if e + b == 0 {
+                    return Err(self
+                        .ctx
+                        .err(el, "emitter_samples and bsdf_samples cannot both be 0"));
+                }
+                params.push(("emitter_samples".to_string(), e as f64));
+                params.push(("bsdf_samples".to_string(), b as f64));
             }
+            // The remaining numbers are SPPM's (photon count, radius, ...).
+            "sppm" => {
+                for c in &el.children {
+                    if let (Some(name), "float" | "integer") = (c.attr("name"), c.tag.as_str())
+                        && !matches!(name, "max_depth" | "rr_depth" | "samples_per_pass" | "block_size")
+                        && let Some(v) = p.float(name)?
+                    {
+                        params.push((name.to_string(), v as f64));
+                    }
+                }
+            }
+            _ => {}
         }
         p.finish()?;
         Ok(IntegratorDecl {
-            kind,
+            kind: method.to_string(),
             max_depth: max_depth as i32,
             rr_depth: rr_depth as u32,
             params,
         })
     }
 
-    fn sensor(&mut self, el: &Element) -> Res<(Camera, u32)> {
+    fn sensor(&mut self, el: &Element) -> Res<(Camera, u32, Filter)> {
         let p = Props::new(self.ctx, el)?;
         let kind = p.kind()?;
+        let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        let near_clip = p.positive("near_clip", 0.01)?;
+        let far_clip = p.positive("far_clip", 10000.0)?;
+        if far_clip <= near_clip {
+            return Err(p.err_at("far_clip", "far_clip must exceed near_clip".into()));
+        }
+        self.far_clip = far_clip;
         let (aperture_radius, focus_distance) = match kind {
-            "perspective" => (0.0, 1.0),
-            "thinlens" => (
-                p.float_or("aperture_radius", 0.0)?,
-                p.positive("focus_distance", 0.0)?,
-            ),
+            "perspective" => {
+                // Mitsuba's RGB variants accept and ignore it on a pinhole.
+                let _ = p.float("focus_distance")?;
+                (0.0, 1.0)
+            }
+            "thinlens" => {
+                let Some(r) = p.float("aperture_radius")? else {
+                    return Err(self.ctx.err(el, "a thinlens sensor needs an aperture_radius"));
+                };
+                if r < 0.0 {
+                    return Err(p.err_at("aperture_radius", "aperture_radius cannot be negative".into()));
+                }
+                // Mitsuba focuses at the far clipping plane unless told otherwise.
+                (r, p.positive("focus_distance", far_clip)?)
+            }
             other => {
                 return Err(self.ctx.err(
                     el,
@@ -238,79 +368,83 @@ impl<'a> Builder<'a> {
                 ));
             }
         };
-        if aperture_radius < 0.0 {
-            return Err(p.err_at("aperture_radius", "aperture_radius cannot be negative".into()));
+        for name in ["principal_point_offset_x", "principal_point_offset_y"] {
+            if p.float(name)?.is_some_and(|v| v != 0.0) {
+                return Err(p.err_at(name, format!("a nonzero {name} is not supported")));
+            }
         }
-        let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
-        let near_clip = p.positive("near_clip", 0.01)?;
-        let far_clip = p.positive("far_clip", 10000.0)?;
-        if far_clip <= near_clip {
-            return Err(p.err_at("far_clip", "far_clip must exceed near_clip".into()));
-        }
-        let fov = match (p.float("fov")?, p.string("focal_length")?) {
+        let (fov, fov_axis) = match (p.float("fov")?, p.string("focal_length")?) {
             (Some(_), Some(_)) => return Err(self.ctx.err(el, "give fov or focal_length, not both")),
-            (Some(f), None) => f,
+            (Some(f), None) => (f, p.string("fov_axis")?.unwrap_or("x")),
             (None, focal) => {
+                if p.string("fov_axis")?.is_some() {
+                    return Err(p.err_at(
+                        "fov_axis",
+                        "fov_axis goes with fov; a focal_length is measured along the film's diagonal".into(),
+                    ));
+                }
                 let focal = focal.unwrap_or("50mm");
                 let mm = focal.strip_suffix("mm").unwrap_or(focal);
                 let mm = p.parse_f32(el, mm)?;
                 if mm <= 0.0 {
                     return Err(p.err_at("focal_length", "focal_length must be positive".into()));
                 }
-                // Mitsuba measures the focal length against a 36 mm wide film.
-                2.0 * (36.0 / (2.0 * mm)).atan().to_degrees()
+                // Mitsuba measures a focal length against the diagonal of 35 mm film (36 x 24 mm).
+                let diagonal = (36.0f64 * 36.0 + 24.0 * 24.0).sqrt();
+                (
+                    (2.0 * (diagonal / (2.0 * mm as f64)).atan().to_degrees()) as f32,
+                    "diagonal",
+                )
             }
         };
         if !(fov > 0.0 && fov < 180.0) {
             return Err(p.err_at("fov", format!("fov must lie in (0, 180) degrees, not {fov}")));
         }
-        let fov_axis = p.string("fov_axis")?.unwrap_or("x");
 
         let (_, _, medium) = self.media_of(&p, false)?;
         self.camera_medium = medium;
         let film = p
             .object("film")?
             .ok_or_else(|| self.ctx.err(el, "the sensor has no <film>"))?;
-        let (width, height) = self.film(film)?;
+        let (width, height, filter) = self.film(film)?;
         let spp = match p.object("sampler")? {
             Some(s) => self.sampler(s)?,
             None => 4,
         };
         p.finish()?;
 
-        let aspect = width as f32 / height as f32;
-        let tan_half = (fov.to_radians() * 0.5).tan();
-        let along_x = match fov_axis {
-            "x" => true,
-            "y" => false,
-            "smaller" => aspect <= 1.0,
-            "larger" => aspect > 1.0,
+        // Mitsuba converts every fov_axis to the x axis's field of view.
+        let aspect = width as f64 / height as f64;
+        let tan_half = ((fov as f64).to_radians() * 0.5).tan();
+        let tan_half_x = match fov_axis {
+            "x" => tan_half,
+            "y" => tan_half * aspect,
+            "diagonal" => tan_half * aspect / (aspect * aspect + 1.0).sqrt(),
+            "smaller" if aspect > 1.0 => tan_half * aspect,
+            "smaller" => tan_half,
+            "larger" if aspect > 1.0 => tan_half,
+            "larger" => tan_half * aspect,
             other => {
                 return Err(p.err_at(
                     "fov_axis",
-                    format!("fov_axis \"{other}\" is not supported (x, y, smaller, larger)"),
+                    format!("fov_axis \"{other}\" is not supported (x, y, diagonal, smaller, larger)"),
                 ));
             }
         };
-        let (tan_half_x, tan_half_y) = if along_x {
-            (tan_half, tan_half / aspect)
-        } else {
-            (tan_half * aspect, tan_half)
-        };
         let camera = Camera {
             to_world,
-            tan_half_x,
-            tan_half_y,
+            tan_half_x: tan_half_x as f32,
+            tan_half_y: (tan_half_x / aspect) as f32,
             width,
             height,
             aperture_radius,
             focus_distance,
             near_clip,
         };
-        Ok((camera, spp))
+        Ok((camera, spp, filter))
     }
 
-    fn film(&mut self, el: &Element) -> Res<(u32, u32)> {
+    fn film(&mut self, el: &Element) -> Res<(u32, u32, Filter)> {
         let p = Props::new(self.ctx, el)?;
         if p.kind()? != "hdrfilm" {
             return Err(self.ctx.err(el, "only hdrfilm is supported"));
@@ -336,19 +470,45 @@ impl<'a> Builder<'a> {
                 format!("pixel_format \"{f}\" is not supported (rgb, rgba)"),
             ));
         }
-        match p.object("rfilter")? {
-            Some(f) if f.attr("type") == Some("box") => {}
-            Some(f) => {
-                return Err(self.ctx.err(f, "only the box reconstruction filter is supported"));
+        let filter = match p.object("rfilter")? {
+            Some(f) => self.rfilter(f)?,
+            None => Filter::DEFAULT,
+        };
+        p.finish()?;
+        Ok((w, h, filter))
+    }
+
+    /// `<rfilter>`: Mitsuba's `box`, `tent` and `gaussian`, with their defaults.
+    fn rfilter(&self, el: &Element) -> Res<Filter> {
+        let p = Props::new(self.ctx, el)?;
+        let filter = match p.kind()? {
+            "box" => Filter::Box,
+            "tent" => Filter::Tent {
+                radius: p.positive("radius", 1.0)?,
+            },
+            "gaussian" => Filter::Gaussian {
+                stddev: p.positive("stddev", 0.5)?,
+            },
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("rfilter type \"{other}\" is not supported (box, tent, gaussian)"),
+                ));
             }
-            None => self.warnings.push(format!(
-                "{}:{}: <film> has no <rfilter>; Mitsuba would use a Gaussian filter, we use box",
-                self.ctx.file.display(),
-                el.line
-            )),
+        };
+        // A sample reaches (2 reach + 1)^2 pixels: wider filters are blurs, not pixel filters.
+        if filter.reach() > MAX_FILTER_REACH {
+            return Err(self.ctx.err(
+                el,
+                format!(
+                    "a filter of radius {} pixels is too wide (at most {} pixels)",
+                    filter.radius(),
+                    MAX_FILTER_REACH as f32 + 0.5
+                ),
+            ));
         }
         p.finish()?;
-        Ok((w, h))
+        Ok(filter)
     }
 
     fn sampler(&mut self, el: &Element) -> Res<u32> {
@@ -699,16 +859,20 @@ impl<'a> Builder<'a> {
 
         let (interior, exterior, _) = self.media_of(&p, true)?;
         let nested = self.nested_bsdfs(&p)?;
+        let emitter = p.object("emitter")?;
         let bsdf = match nested.len() {
-            // A medium's boundary without a material is no surface at all, as in Mitsuba.
-            0 if interior.is_some() || exterior.is_some() => Bsdf::Null,
+            // Mitsuba's defaults: an emitter absorbs what reaches it; anything else, a medium's
+            // boundary included, is grey (a boundary must say <bsdf type="null"/>).
+            0 if emitter.is_some() => Bsdf::Diffuse(Diffuse {
+                reflectance: Rgb::ZERO,
+            }),
             0 => Bsdf::Diffuse(Diffuse {
                 reflectance: Rgb::splat(0.5),
             }),
             1 => nested.into_iter().next().expect("one element"),
             _ => return Err(self.ctx.err(el, "a shape takes one bsdf")),
         };
-        if let Some(em) = p.object("emitter")? {
+        if let Some(em) = emitter {
             let ep = Props::new(self.ctx, em)?;
             if ep.kind()? != "area" {
                 return Err(self.ctx.err(em, "a shape can only carry an area emitter"));

@@ -92,6 +92,8 @@ pub struct Scene {
     pub light_selection: Distribution1D,
     /// The sensor.
     pub camera: Camera,
+    /// The film's reconstruction filter.
+    pub filter: crate::filter::Filter,
     /// The sampler's `sample_count`: default samples per pixel.
     pub spp: u32,
     /// The integrator's parameters.
