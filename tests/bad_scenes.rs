@@ -105,33 +105,31 @@ fn missing_mesh() {
     Scene::load(&path, &[]).unwrap();
 }
 
+/// A local render resolves files as Mitsuba does (`..` and absolute names allowed, since
+/// Mitsuba's own scenes keep meshes in `../../common`); inside a job's bundle every file must
+/// stay in the bundle's folder, however it is named or linked.
 #[test]
 fn mesh_path_leaving_the_folder() {
-    for name in ["../outside.obj", "sub/../../outside.obj"] {
-        expect_error(
-            &scene_text(
+    let (guard, path) = write_scene("");
+    let absolute = guard.path().join("outside.obj");
+    let bundle = path.parent().unwrap();
+    for name in ["../outside.obj".to_string(), absolute.display().to_string()] {
+        std::fs::write(
+            &path,
+            scene_text(
                 &format!("<shape type=\"obj\"><string name=\"filename\" value=\"{name}\"/></shape>"),
                 FILM,
             ),
-            8,
-            "stay inside",
+        )
+        .unwrap();
+        let local = Scene::load(&path, &[]).unwrap();
+        assert_eq!(local.files, vec![absolute.canonicalize().unwrap()]);
+        let msg = Scene::load_inside(&path, &[], bundle).unwrap_err().to_string();
+        assert!(
+            msg.starts_with(&format!("{}:8: ", path.display())) && msg.contains("outside the job's bundle"),
+            "{msg}"
         );
     }
-    let (guard, path) = write_scene("");
-    let absolute = guard.path().join("outside.obj");
-    std::fs::write(
-        &path,
-        scene_text(
-            &format!(
-                "<shape type=\"obj\"><string name=\"filename\" value=\"{}\"/></shape>",
-                absolute.display()
-            ),
-            FILM,
-        ),
-    )
-    .unwrap();
-    let msg = Scene::load(&path, &[]).unwrap_err().to_string();
-    assert!(msg.contains(":8: ") && msg.contains("stay inside"), "{msg}");
 }
 
 #[cfg(unix)]
@@ -146,8 +144,79 @@ fn symlink_leaving_the_folder() {
         path.parent().unwrap().join("link.obj"),
     )
     .unwrap();
+    let msg = Scene::load_inside(&path, &[], path.parent().unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("outside the job's bundle"), "{msg}");
+}
+
+/// Mitsuba's file structure: an `<include>` (a fragment with a `<scene>` root and one with a
+/// single object), defaults declared in the included file, a `<path>` folder, and a top-level
+/// area emitter that a shape refers to; errors in an included file name that file.
+#[test]
+fn includes_paths_and_referenced_emitters() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = root.path().join("scenes");
+    std::fs::create_dir_all(dir.join("fragments")).unwrap();
+    std::fs::create_dir_all(root.path().join("common")).unwrap();
+    std::fs::write(
+        root.path().join("common/tri.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("fragments/base.xml"),
+        r#"<scene version="3.0.0"><default name="res" value="8"/>
+            <emitter type="area" id="light"><rgb name="radiance" value="2"/></emitter></scene>"#,
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("fragments/grey.xml"),
+        r#"<bsdf version="3.0.0" type="diffuse" id="grey"/>"#,
+    )
+    .unwrap();
+    let text = r#"<scene version="3.0.0">
+    <path value="../common"/>
+    <include filename="fragments/base.xml"/>
+    <include filename="fragments/grey.xml"/>
+    <sensor type="perspective"><float name="fov" value="45"/><float name="focus_distance" value="3"/>
+        <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/></film>
+    </sensor>
+    <shape type="obj"><string name="filename" value="tri.obj"/><ref id="grey"/><ref id="light"/></shape>
+</scene>"#;
+    let path = dir.join("scene.xml");
+    std::fs::write(&path, text).unwrap();
+    let scene = Scene::load(&path, &[]).unwrap();
+    assert_eq!((scene.width(), scene.lights.len()), (8, 1));
+    assert_eq!(scene.files.len(), 3, "{:?}", scene.files);
+    // The same from a bundle of the common folder: everything lies inside it.
+    Scene::load_inside(&path, &[], root.path()).unwrap();
+    // ... but not from a bundle of the scene's folder alone.
+    assert!(Scene::load_inside(&path, &[], &dir).is_err());
+    // An unused -D is an error, as in Mitsuba.
+    let msg = Scene::load(&path, &[("spp".into(), "4".into())])
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("spp=4"), "{msg}");
+    // An error inside an included file names that file and its line.
+    std::fs::write(
+        dir.join("fragments/grey.xml"),
+        "<bsdf version=\"3.0.0\" type=\"diffuse\" id=\"grey\">\n<float name=\"nonsense\" value=\"1\"/></bsdf>",
+    )
+    .unwrap();
     let msg = Scene::load(&path, &[]).unwrap_err().to_string();
-    assert!(msg.contains("outside the scene's folder"), "{msg}");
+    assert!(
+        msg.contains("fragments/grey.xml:2: ") && msg.contains("nonsense"),
+        "{msg}"
+    );
+    // Includes that include each other stop at Mitsuba's depth limit.
+    std::fs::write(
+        dir.join("fragments/grey.xml"),
+        r#"<scene version="3.0.0"><include filename="grey.xml"/></scene>"#,
+    )
+    .unwrap();
+    let msg = Scene::load(&path, &[]).unwrap_err().to_string();
+    assert!(msg.contains("nest more than 15"), "{msg}");
 }
 
 #[test]

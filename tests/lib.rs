@@ -136,8 +136,14 @@ pub fn mitsuba_mse(name: &str) -> (u64, f64) {
 /// records Mitsuba's own MSE for, and checks it against `refs/NAME.exr`: every channel mean
 /// within 1%, and an MSE no worse than 1.25 times Mitsuba's.
 pub fn check_declared_against_mitsuba(name: &str) -> Comparison {
+    check_scene_against_mitsuba(&refs_dir().join(format!("{name}.xml")), &[], name)
+}
+
+/// [`check_declared_against_mitsuba`] for any scene file and parameters, against the reference
+/// `refs/REFERENCE.exr` and `.json`.
+pub fn check_scene_against_mitsuba(scene: &Path, defines: &[(&str, &str)], name: &str) -> Comparison {
     let (spp, mitsuba) = mitsuba_mse(name);
-    let scene = load(&refs_dir().join(format!("{name}.xml")), &[]);
+    let scene = load(scene, defines);
     let reference = reference(&format!("{name}.exr"));
     // Like Mitsuba's figure, the median over seeds: one seed's MSE varies by ±30% on scenes
     // with glints or small bright lights.

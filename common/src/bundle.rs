@@ -36,20 +36,33 @@ fn is_plain_relative(p: &Path) -> bool {
             .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
 }
 
-/// Packs `scene` and `files` (relative to the scene's folder) into a tar archive, with the
-/// scene at the archive's top level.
-pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<Vec<u8>, BundleError> {
-    let dir = scene.parent().unwrap_or(Path::new("."));
-    let mut builder = tar::Builder::new(Vec::new());
-    let mut add = |rel: &Path| -> Result<(), BundleError> {
-        if !is_plain_relative(rel) {
-            return Err(BundleError::Entry(
-                rel.display().to_string(),
-                "leaves the scene's folder",
-            ));
+/// Packs `scene` and the files it reads (`files`, absolute) into a tar archive, under their
+/// deepest common folder, so that the names the scene uses (`..` included) resolve the same
+/// inside the bundle. Returns the archive and the scene's path inside it.
+pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<(Vec<u8>, PathBuf), BundleError> {
+    let canonical = |p: &Path| {
+        p.canonicalize()
+            .map_err(|e| BundleError::Io(p.display().to_string(), e))
+    };
+    let scene = canonical(scene)?;
+    let mut all = vec![scene.clone()];
+    for f in files {
+        all.push(canonical(f)?);
+    }
+    let mut root = scene.parent().unwrap_or(Path::new("/")).to_path_buf();
+    for f in &all {
+        while !f.starts_with(&root) {
+            root = root.parent().unwrap_or(Path::new("/")).to_path_buf();
         }
-        let full = dir.join(rel);
-        let data = std::fs::read(&full).map_err(|e| BundleError::Io(full.display().to_string(), e))?;
+    }
+    let mut builder = tar::Builder::new(Vec::new());
+    let mut seen = std::collections::BTreeSet::new();
+    for full in &all {
+        let rel = full.strip_prefix(&root).expect("under the common folder");
+        if !seen.insert(rel.to_path_buf()) {
+            continue;
+        }
+        let data = std::fs::read(full).map_err(|e| BundleError::Io(full.display().to_string(), e))?;
         let mut header = tar::Header::new_gnu();
         header.set_size(data.len() as u64);
         header.set_mode(0o644);
@@ -57,23 +70,18 @@ pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<Vec<u8>, BundleError> {
         header.set_cksum();
         builder
             .append_data(&mut header, rel, data.as_slice())
-            .map_err(|e| BundleError::Io(rel.display().to_string(), e))
-    };
-    let name = PathBuf::from(
-        scene
-            .file_name()
-            .ok_or_else(|| BundleError::Entry(scene.display().to_string(), "not a file"))?,
-    );
-    add(&name)?;
-    let mut seen = std::collections::BTreeSet::new();
-    for f in files {
-        if seen.insert(f.clone()) {
-            add(f)?;
-        }
+            .map_err(|e| BundleError::Io(rel.display().to_string(), e))?;
     }
-    builder
+    let archive = builder
         .into_inner()
-        .map_err(|e| BundleError::Io("archive".into(), e))
+        .map_err(|e| BundleError::Io("archive".into(), e))?;
+    Ok((
+        archive,
+        scene
+            .strip_prefix(&root)
+            .expect("under the common folder")
+            .to_path_buf(),
+    ))
 }
 
 /// Unpacks `bytes` into `dest` (created if missing), refusing anything but plain files and
@@ -129,21 +137,25 @@ mod tests {
     #[test]
     fn packs_unpacks_and_hashes_deterministically() {
         let src = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(src.path().join("scenes/a")).unwrap();
         std::fs::create_dir(src.path().join("meshes")).unwrap();
-        std::fs::write(src.path().join("scene.xml"), "<scene/>").unwrap();
+        std::fs::write(src.path().join("scenes/a/scene.xml"), "<scene/>").unwrap();
         std::fs::write(src.path().join("meshes/a.obj"), "v 0 0 0").unwrap();
-        let files = vec![PathBuf::from("meshes/a.obj")];
-        let a = pack(&src.path().join("scene.xml"), &files).unwrap();
-        let b = pack(&src.path().join("scene.xml"), &files).unwrap();
+        // A mesh outside the scene's folder (as Mitsuba's scenes keep them, "../../meshes").
+        let files = vec![src.path().join("scenes/a/../../meshes/a.obj")];
+        let scene = src.path().join("scenes/a/scene.xml");
+        let (a, rel) = pack(&scene, &files).unwrap();
+        let (b, _) = pack(&scene, &files).unwrap();
         assert_eq!(content_hash(&a), content_hash(&b));
+        assert_eq!(rel, PathBuf::from("scenes/a/scene.xml"));
         let dst = tempfile::tempdir().unwrap();
         let written = unpack(&a, dst.path()).unwrap();
         assert_eq!(written.len(), 2);
         assert_eq!(
-            std::fs::read_to_string(dst.path().join("meshes/a.obj")).unwrap(),
+            std::fs::read_to_string(dst.path().join("scenes/a/../../meshes/a.obj")).unwrap(),
             "v 0 0 0"
         );
-        assert!(pack(&src.path().join("scene.xml"), &[PathBuf::from("../x")]).is_err());
+        assert!(pack(&scene, &[src.path().join("missing.obj")]).is_err());
     }
 
     #[test]

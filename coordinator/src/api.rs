@@ -220,11 +220,12 @@ fn accept_bundle(
     if !files.contains(&scene_rel) {
         return Err(bad(format!("the bundle has no file \"{}\"", scene_rel.display())));
     }
-    let loaded = Scene::load(&scratch.join(&scene_rel), &settings.defines).map_err(|mut e| {
-        // Name files as the user knows them: relative to the bundle.
-        e.file = e.file.strip_prefix(scratch).map(PathBuf::from).unwrap_or(e.file);
-        bad(e.to_string())
-    })?;
+    let loaded =
+        Scene::load_inside(&scratch.join(&scene_rel), &settings.defines, scratch).map_err(|mut e| {
+            // Name files as the user knows them: relative to the bundle.
+            e.file = e.file.strip_prefix(scratch).map(PathBuf::from).unwrap_or(e.file);
+            bad(e.to_string())
+        })?;
     let resolved = settings.resolve(&loaded, false).map_err(|e| bad(e.to_string()))?;
     let total = resolved.passes.expect("closed-ended resolution has a count");
     let hash = photonfarm::bundle::content_hash(bundle);

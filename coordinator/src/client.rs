@@ -100,13 +100,8 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
     // Load locally first: a broken scene fails here, with its file and line, before uploading.
     let scene = Scene::load(&args.job.scene, &settings.defines)?;
-    let bundle = photonfarm::bundle::pack(&args.job.scene, &scene.files)?;
-    let scene_name = args
-        .job
-        .scene
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let (bundle, scene_in_bundle) = photonfarm::bundle::pack(&args.job.scene, &scene.files)?;
+    let scene_name = scene_in_bundle.to_string_lossy().into_owned();
     let client = ApiClient::new(&args.to, args.token.clone().filter(|t| !t.is_empty()));
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {

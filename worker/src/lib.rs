@@ -282,7 +282,8 @@ async fn load_scene(
     }
     let path = dir.join(&lease.scene);
     let defines = lease.defines.clone();
-    let scene = tokio::task::spawn_blocking(move || Scene::load(&path, &defines)).await??;
+    let dir = dir.clone();
+    let scene = tokio::task::spawn_blocking(move || Scene::load_inside(&path, &defines, &dir)).await??;
     let scene = Arc::new(scene);
     scenes.insert(key, scene.clone());
     Ok(scene)

@@ -7,7 +7,7 @@ use glam::{Mat3A, Mat4, Vec3A};
 
 use super::mesh::{self, Mesh};
 use super::named;
-use super::props::{Ctx, Props, Res};
+use super::props::{Ctx, FileRoot, Props, Res};
 use super::xml::{self, Element};
 use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
 use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Ggx, Plastic};
@@ -20,18 +20,23 @@ use crate::light::{AreaLight, BeamLight, Light, PointLight, SpotLight};
 use crate::medium::{Medium, Phase};
 use crate::sampling::Distribution1D;
 
-pub(super) fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
+pub(super) fn load(path: &Path, defines: &[(String, String)], root: FileRoot) -> Result<Scene, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError {
         file: path.to_path_buf(),
         line: 0,
         element: "scene file".into(),
         message: format!("cannot read: {e}"),
     })?;
-    from_str(&text, path, defines)
+    from_str(&text, path, defines, root)
 }
 
-pub(super) fn from_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
-    let root = xml::parse(path, text, defines)?;
+pub(super) fn from_str(
+    text: &str,
+    path: &Path,
+    defines: &[(String, String)],
+    root: FileRoot,
+) -> Result<Scene, SceneError> {
+    let parsed = xml::parse(path, text, defines)?;
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -39,8 +44,26 @@ pub(super) fn from_str(text: &str, path: &Path, defines: &[(String, String)]) ->
     let ctx = Ctx {
         file: path.to_path_buf(),
         dir: dir.to_path_buf(),
+        search_dirs: parsed.search_dirs,
+        root,
     };
-    Builder::new(&ctx).scene(&root)
+    let mut builder = Builder::new(&ctx);
+    for inc in &parsed.includes {
+        if let FileRoot::Inside(r) = &ctx.root
+            && !inc
+                .canonicalize()
+                .is_ok_and(|p| r.canonicalize().is_ok_and(|r| p.starts_with(r)))
+        {
+            return Err(ctx.err(
+                &parsed.root,
+                format!("included file {} lies outside the job's bundle", inc.display()),
+            ));
+        }
+        builder
+            .files
+            .push(inc.canonicalize().unwrap_or_else(|_| inc.clone()));
+    }
+    builder.scene(&parsed.root)
 }
 
 /// The widest reconstruction filter, in pixels on each side of a sample's own.
@@ -64,6 +87,10 @@ struct Builder<'a> {
     files: Vec<std::path::PathBuf>,
     /// The sensor's far clipping distance, checked against the scene's extent.
     far_clip: f32,
+    /// Ids of top-level area emitters (shapes refer to them).
+    area_ids: std::collections::HashSet<String>,
+    /// Those a shape has taken: each belongs to one shape.
+    area_taken: std::collections::HashSet<String>,
 }
 
 impl<'a> Builder<'a> {
@@ -83,6 +110,8 @@ impl<'a> Builder<'a> {
             warnings: Vec::new(),
             files: Vec::new(),
             far_clip: f32::INFINITY,
+            area_ids: Default::default(),
+            area_taken: Default::default(),
         }
     }
 
@@ -111,10 +140,25 @@ impl<'a> Builder<'a> {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
         }
+        // Area emitters declared at the top level shine through the shape that refers to them.
+        let mut area_ids: HashMap<String, &Element> = HashMap::new();
+        for el in root
+            .children
+            .iter()
+            .filter(|e| e.tag == "emitter" && e.attr("type") == Some("area"))
+        {
+            if let Some(id) = el.attr("id") {
+                if area_ids.insert(id.to_string(), el).is_some() || self.bsdf_ids.contains_key(id) {
+                    return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
+                }
+            }
+        }
+        self.area_ids = area_ids.keys().cloned().collect();
         for el in &root.children {
             match el.tag.as_str() {
                 "bsdf" | "medium" => {}
-                "shape" => self.shape(el)?,
+                "shape" => self.shape(el, &area_ids)?,
+                "emitter" if el.attr("type") == Some("area") && el.attr("id").is_some() => {}
                 "emitter" => self.emitter(el)?,
                 "sensor" if sensor.is_some() => return Err(ctx.err(el, "only one <sensor> is supported")),
                 "sensor" => sensor = Some(el),
@@ -134,6 +178,15 @@ impl<'a> Builder<'a> {
             return Err(ctx.err(root, "the scene has no <sensor>"));
         };
         let (camera, spp, filter) = self.sensor(sensor)?;
+        for (id, el) in &area_ids {
+            if !self.area_taken.contains(id) {
+                self.warnings.push(format!(
+                    "{}:{}: area emitter \"{id}\" is not referred to by any shape and gives no light",
+                    el.file.display(),
+                    el.line
+                ));
+            }
+        }
         let integrator = integrator.unwrap_or(IntegratorDecl {
             kind: "path".into(),
             max_depth: -1,
@@ -232,7 +285,7 @@ impl<'a> Builder<'a> {
             let decl = self.integrator(inner)?;
             self.warnings.push(format!(
                 "{}:{}: <integrator type=\"{kind}\">: rendering its nested {} integrator; the {kind} outputs are not written",
-                self.ctx.file.display(),
+                el.file.display(),
                 el.line,
                 decl.kind
             ));
@@ -244,7 +297,7 @@ impl<'a> Builder<'a> {
                 self.warnings.push(format!(
                     "{}:{}: <integrator type=\"ptracer\">: rendered with our path tracer (the same image, \
                      different noise: a particle tracer is not implemented)",
-                    self.ctx.file.display(),
+                    el.file.display(),
                     el.line
                 ));
                 "path"
@@ -556,7 +609,10 @@ impl<'a> Builder<'a> {
         let refs: Vec<&Element> = p
             .objects("ref")
             .into_iter()
-            .filter(|c| !c.attr("id").is_some_and(|id| self.medium_ids.contains_key(id)))
+            .filter(|c| {
+                !c.attr("id")
+                    .is_some_and(|id| self.medium_ids.contains_key(id) || self.area_ids.contains(id))
+            })
             .collect();
         for c in p.objects("bsdf").into_iter().chain(refs) {
             out.push(self.bsdf_or_ref(c)?);
@@ -794,7 +850,7 @@ impl<'a> Builder<'a> {
         Ok(read("int_ior", default_int)? / read("ext_ior", "air")?)
     }
 
-    fn shape(&mut self, el: &Element) -> Res<()> {
+    fn shape(&mut self, el: &Element, area_ids: &HashMap<String, &Element>) -> Res<()> {
         let p = Props::new(self.ctx, el)?;
         let index = self.shapes.len() as u32;
         let kind = p.kind()?;
@@ -826,8 +882,8 @@ impl<'a> Builder<'a> {
                 let name = p
                     .string("filename")?
                     .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
-                let path = p.file_in_scene_dir(name)?;
-                self.files.push(std::path::PathBuf::from(name));
+                let path = p.resolve_file("filename", name)?;
+                self.files.push(path.clone());
                 let mut m = if kind == "obj" {
                     mesh::load_obj(&path)
                 } else {
@@ -859,7 +915,26 @@ impl<'a> Builder<'a> {
 
         let (interior, exterior, _) = self.media_of(&p, true)?;
         let nested = self.nested_bsdfs(&p)?;
-        let emitter = p.object("emitter")?;
+        let referred: Vec<&Element> = p
+            .objects("ref")
+            .into_iter()
+            .filter_map(|r| r.attr("id").and_then(|id| area_ids.get(id)).copied())
+            .collect();
+        let emitter = match (p.object("emitter")?, referred.as_slice()) {
+            (None, []) => None,
+            (Some(e), []) => Some(e),
+            (None, [e]) => {
+                let id = e.attr("id").expect("referred to by id");
+                if !self.area_taken.insert(id.to_string()) {
+                    return Err(self.ctx.err(
+                        el,
+                        format!("area emitter \"{id}\" already belongs to another shape"),
+                    ));
+                }
+                Some(*e)
+            }
+            _ => return Err(self.ctx.err(el, "a shape takes one emitter")),
+        };
         let bsdf = match nested.len() {
             // Mitsuba's defaults: an emitter absorbs what reaches it; anything else, a medium's
             // boundary included, is grey (a boundary must say <bsdf type="null"/>).
@@ -877,7 +952,7 @@ impl<'a> Builder<'a> {
             if ep.kind()? != "area" {
                 return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
             }
-            let radiance = ep.non_negative_rgb("radiance", Rgb::ONE)?;
+            let radiance = ep.emission("radiance", Rgb::ONE)?;
             ep.finish()?;
             self.area_emitters.push((index, radiance));
         }
@@ -926,7 +1001,7 @@ impl<'a> Builder<'a> {
                 };
                 Light::Point(PointLight {
                     position,
-                    intensity: p.non_negative_rgb("intensity", Rgb::ONE)?,
+                    intensity: p.emission("intensity", Rgb::ONE)?,
                 })
             }
             "spot" => {
@@ -943,7 +1018,7 @@ impl<'a> Builder<'a> {
                 Light::Spot(SpotLight {
                     position: translation.into(),
                     to_local: Mat3A::from_quat(rotation).transpose(),
-                    intensity: p.non_negative_rgb("intensity", Rgb::ONE)?,
+                    intensity: p.emission("intensity", Rgb::ONE)?,
                     cutoff: cutoff.to_radians(),
                     beam_width: beam.to_radians(),
                 })

@@ -14,6 +14,7 @@ mod transform;
 mod xml;
 
 pub use error::SceneError;
+pub use props::FileRoot;
 
 use std::path::{Path, PathBuf};
 
@@ -100,22 +101,28 @@ pub struct Scene {
     pub integrator: IntegratorDecl,
     /// Things the user should know that do not stop the render.
     pub warnings: Vec<String>,
-    /// Files the scene reads besides itself (meshes), relative to its folder: what a job
-    /// bundle must carry.
+    /// Files the scene reads besides itself (included XML, meshes), resolved and absolute:
+    /// what a job bundle must carry.
     pub files: Vec<PathBuf>,
     /// How many shapes have a null BSDF (shadow rays must look past them).
     pub null_shapes: usize,
 }
 
 impl Scene {
-    /// Loads a Mitsuba 3 XML scene; `defines` are `-D name=value` overrides.
+    /// Loads a Mitsuba 3 XML scene; `defines` are `-D name=value` overrides. Files resolve as
+    /// in Mitsuba, wherever they are: for the user's own scenes on their own machine.
     pub fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
-        build::load(path, defines)
+        build::load(path, defines, FileRoot::Anywhere)
     }
 
-    /// Loads a scene from text, with `path` naming it in errors and anchoring mesh paths.
+    /// Loads a scene whose every file must lie inside `root`: a job bundle's folder.
+    pub fn load_inside(path: &Path, defines: &[(String, String)], root: &Path) -> Result<Scene, SceneError> {
+        build::load(path, defines, FileRoot::Inside(root.to_path_buf()))
+    }
+
+    /// Loads a scene from text, with `path` naming it in errors and anchoring file names.
     pub fn from_str(text: &str, path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
-        build::from_str(text, path, defines)
+        build::from_str(text, path, defines, FileRoot::Anywhere)
     }
 
     /// Image width.

@@ -11,16 +11,28 @@ use super::transform::parse_transform;
 use super::xml::Element;
 use crate::color::Rgb;
 
-/// Where errors point: the scene file, and its folder for relative mesh paths.
+/// Where a scene's files may come from.
+#[derive(Clone, Debug)]
+pub enum FileRoot {
+    /// Anywhere, as Mitsuba resolves them: a local render of the user's own files.
+    Anywhere,
+    /// Only inside this folder (a job bundle's): a farm never reads outside a bundle.
+    Inside(PathBuf),
+}
+
+/// The scene file, the folders that file names are resolved in, and where files may come from.
 pub(crate) struct Ctx {
     pub file: PathBuf,
     pub dir: PathBuf,
+    /// `<path>` folders, searched before the scene's folder.
+    pub search_dirs: Vec<PathBuf>,
+    pub root: FileRoot,
 }
 
 impl Ctx {
     pub fn err(&self, el: &Element, message: impl Into<String>) -> SceneError {
         SceneError {
-            file: self.file.clone(),
+            file: el.file.to_path_buf(),
             line: el.line,
             element: el.describe(),
             message: message.into(),
@@ -39,6 +51,9 @@ const VALUE_TAGS: &[&str] = &[
     "spectrum",
     "transform",
 ];
+
+/// Mitsuba's `xyz_to_srgb(Color3f(1))`: the linear sRGB colour of a flat spectrum of value 1.
+const FLAT_SPECTRUM_RGB: Rgb = Rgb::new(1.204_794, 0.948_291, 0.908_916);
 
 /// The parameters and nested objects of one element.
 pub(crate) struct Props<'a> {
@@ -210,7 +225,16 @@ impl<'a> Props<'a> {
         Ok(v)
     }
 
-    /// A colour with no negative channel (radiance, intensity).
+    /// Emitted light (radiance, intensity): a colour with no negative channel. A single-valued
+    /// `<spectrum>` is a flat spectrum, whose colour in Mitsuba's RGB variants is not grey: its
+    /// sRGB coordinates against the D65 white are v · xyz_to_srgb(1, 1, 1).
+    pub fn emission(&self, name: &str, default: Rgb) -> Res<Rgb> {
+        let flat = self.tag_of(name) == Some("spectrum");
+        let v = self.non_negative_rgb(name, default)?;
+        Ok(if flat { v * FLAT_SPECTRUM_RGB } else { v })
+    }
+
+    /// A colour with no negative channel.
     pub fn non_negative_rgb(&self, name: &str, default: Rgb) -> Res<Rgb> {
         let v = self.rgb(name)?.unwrap_or(default);
         if v.min_element() < 0.0 {
@@ -291,29 +315,38 @@ impl<'a> Props<'a> {
         Ok(())
     }
 
-    /// Resolves a mesh file name: relative to the scene's folder, and never outside it.
-    pub fn file_in_scene_dir(&self, name: &str) -> Res<PathBuf> {
-        let rel = Path::new(name);
-        let leaves = rel.is_absolute()
-            || rel
-                .components()
-                .any(|c| !matches!(c, std::path::Component::Normal(_) | std::path::Component::CurDir));
-        if leaves {
-            return Err(self.err_at(
-                "filename",
-                format!("file name \"{name}\" must be relative to the scene's folder and stay inside it"),
-            ));
-        }
-        let path = self.ctx.dir.join(rel);
-        // Symbolic links could still point outside: compare the resolved paths.
-        let (Ok(real), Ok(dir)) = (path.canonicalize(), self.ctx.dir.canonicalize()) else {
-            return Err(self.err_at("filename", format!("mesh file \"{}\" not found", path.display())));
+    /// Resolves a file name (parameter `param`) as Mitsuba does: the `<path>` folders (the
+    /// last given first), then the scene's folder; absolute names and `..` are allowed. Inside
+    /// a bundle the file must also lie inside the bundle's folder, links followed.
+    pub fn resolve_file(&self, param: &str, name: &str) -> Res<PathBuf> {
+        let candidates: Vec<PathBuf> = if Path::new(name).is_absolute() {
+            vec![PathBuf::from(name)]
+        } else {
+            self.ctx
+                .search_dirs
+                .iter()
+                .chain(std::iter::once(&self.ctx.dir))
+                .map(|d| d.join(name))
+                .collect()
         };
-        if !real.starts_with(&dir) {
+        let Some(found) = candidates.iter().find(|p| p.is_file()) else {
+            let searched: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
             return Err(self.err_at(
-                "filename",
-                format!("file \"{name}\" resolves outside the scene's folder"),
+                param,
+                format!("file \"{name}\" not found (looked for {})", searched.join(", ")),
             ));
+        };
+        let real = found
+            .canonicalize()
+            .map_err(|e| self.err_at(param, format!("{}: {e}", found.display())))?;
+        if let FileRoot::Inside(root) = &self.ctx.root {
+            let inside = root.canonicalize().is_ok_and(|r| real.starts_with(r));
+            if !inside {
+                return Err(self.err_at(
+                    param,
+                    format!("file \"{name}\" resolves outside the job's bundle"),
+                ));
+            }
         }
         Ok(real)
     }

@@ -1,15 +1,24 @@
-//! Reads the XML into a small tree with line numbers and `$name` parameters substituted.
+//! Reads the XML into a small tree with line numbers and `$name` parameters substituted, as
+//! Mitsuba 3's parser does: `<default>`s take effect in document order wherever they stand,
+//! `<include>` splices in another file (its `<scene>` children, or its one object), `<path>`
+//! adds a folder to search for files, and a `-D` parameter that nothing uses is an error.
 
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use super::SceneError;
+
+/// Mitsuba's limit on nested includes (a cycle of includes stops here too).
+const MAX_INCLUDE_DEPTH: u32 = 15;
 
 /// One XML element, with what errors need to point at it.
 #[derive(Clone, Debug)]
 pub(crate) struct Element {
     pub tag: String,
     pub attrs: Vec<(String, String)>,
+    /// The file the element was written in (the scene or an included file).
+    pub file: Arc<PathBuf>,
     pub line: u32,
     pub children: Vec<Element>,
 }
@@ -35,88 +44,256 @@ impl Element {
     }
 }
 
+/// The scene's element tree and what reading it found out about files.
+pub(crate) struct Parsed {
+    pub root: Element,
+    /// `<path>` folders, searched first (the last one given first), before the scene's folder.
+    pub search_dirs: Vec<PathBuf>,
+    /// Included XML files, as resolved.
+    pub includes: Vec<PathBuf>,
+}
+
 /// Parses `text` (the contents of `file`); `defines` are the command line's `-D name=value`,
 /// which override the scene's `<default>`s.
-pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Result<Element, SceneError> {
-    let doc = roxmltree::Document::parse(text).map_err(|e| SceneError {
-        file: file.to_path_buf(),
-        line: e.pos().row,
-        element: "XML".into(),
-        message: format!("malformed XML: {e}"),
-    })?;
-    let root = doc.root_element();
-    let line_of = |n: roxmltree::Node| doc.text_pos_at(n.range().start).row;
-    let err = |n: roxmltree::Node, message: String| SceneError {
-        file: file.to_path_buf(),
-        line: line_of(n),
-        element: format!("<{}>", n.tag_name().name()),
-        message,
+pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Result<Parsed, SceneError> {
+    let mut reader = Reader {
+        params: defines.iter().cloned().collect(),
+        used: defines.iter().map(|(k, _)| (k.clone(), false)).collect(),
+        search_dirs: Vec::new(),
+        includes: Vec::new(),
     };
-    if root.tag_name().name() != "scene" {
-        return Err(err(root, "the root element must be <scene>".into()));
+    let mut roots = reader.file(file, text, 0, true)?;
+    let root = roots.pop().expect("the main file gives its root");
+    let mut unused: Vec<String> = reader
+        .used
+        .iter()
+        .filter(|(_, used)| !**used)
+        .map(|(k, _)| format!("{k}={}", reader.params[k]))
+        .collect();
+    if !unused.is_empty() {
+        unused.sort();
+        return Err(SceneError {
+            file: file.to_path_buf(),
+            line: 0,
+            element: "-D".into(),
+            message: format!(
+                "parameters the scene never uses (as $name): {} (Mitsuba refuses these too)",
+                unused.join(", ")
+            ),
+        });
     }
-    match root.attribute("version") {
-        Some(v) if v.starts_with("3.") || v.starts_with("2.") => {}
-        Some(v) => {
-            return Err(err(
-                root,
-                format!("unsupported scene version \"{v}\" (expected 3.x)"),
-            ));
-        }
-        None => {
-            return Err(err(
-                root,
-                "missing the version attribute (e.g. version=\"3.0.0\")".into(),
-            ));
-        }
-    }
+    Ok(Parsed {
+        root,
+        search_dirs: reader.search_dirs,
+        includes: reader.includes,
+    })
+}
 
-    // Parameters: the command line's, then the scene's defaults for those it does not set (in
-    // document order, so a default may use an earlier parameter), as Mitsuba does.
-    let mut params: HashMap<String, String> = defines.iter().cloned().collect();
-    for n in root
-        .children()
-        .filter(|n| n.is_element() && n.tag_name().name() == "default")
-    {
-        let (Some(name), Some(value)) = (n.attribute("name"), n.attribute("value")) else {
-            return Err(err(n, "a <default> needs name and value".into()));
+/// Parameters, folders and files gathered across the scene and its includes.
+struct Reader {
+    params: HashMap<String, String>,
+    /// For each `-D` parameter, whether any `$name` used it.
+    used: HashMap<String, bool>,
+    search_dirs: Vec<PathBuf>,
+    includes: Vec<PathBuf>,
+}
+
+impl Reader {
+    /// Reads one file: the main scene (`main`, returns its root) or an included file (returns
+    /// the elements it contributes).
+    fn file(&mut self, file: &Path, text: &str, depth: u32, main: bool) -> Result<Vec<Element>, SceneError> {
+        let doc = roxmltree::Document::parse(text).map_err(|e| SceneError {
+            file: file.to_path_buf(),
+            line: e.pos().row,
+            element: "XML".into(),
+            message: format!("malformed XML: {e}"),
+        })?;
+        let src = Arc::new(file.to_path_buf());
+        let root = doc.root_element();
+        let at = |n: roxmltree::Node, message: String| SceneError {
+            file: file.to_path_buf(),
+            line: doc.text_pos_at(n.range().start).row,
+            element: format!("<{}>", n.tag_name().name()),
+            message,
         };
-        if !params.contains_key(name) {
-            let value = substitute(value, &params).map_err(|m| err(n, m))?;
-            params.insert(name.to_string(), value);
+        if main && root.tag_name().name() != "scene" {
+            return Err(at(root, "the root element must be <scene>".into()));
         }
+        match root.attribute("version") {
+            Some(v) if v.split(['.', ' ']).count() == 3 && (v.starts_with("3.") || v.starts_with("2.")) => {}
+            Some(v) => {
+                return Err(at(
+                    root,
+                    format!("unsupported scene version \"{v}\" (expected 3.x.y)"),
+                ));
+            }
+            None => {
+                return Err(at(
+                    root,
+                    "missing the version attribute (e.g. version=\"3.0.0\")".into(),
+                ));
+            }
+        }
+        let ctx = FileCtx {
+            doc: &doc,
+            src,
+            depth,
+        };
+        if root.tag_name().name() == "scene" {
+            let children = self.children(&ctx, root, true)?;
+            if !main {
+                return Ok(children);
+            }
+            let attrs = root
+                .attributes()
+                .map(|a| (a.name().to_string(), a.value().to_string()))
+                .collect();
+            return Ok(vec![Element {
+                tag: "scene".into(),
+                attrs,
+                file: ctx.src.clone(),
+                line: ctx.line(root),
+                children,
+            }]);
+        }
+        Ok(vec![self.element(&ctx, root)?])
     }
 
-    fn convert(
-        n: roxmltree::Node,
-        params: &HashMap<String, String>,
-        line_of: &dyn Fn(roxmltree::Node) -> u32,
-        err: &dyn Fn(roxmltree::Node, String) -> SceneError,
-    ) -> Result<Element, SceneError> {
+    /// One element and everything below it.
+    fn element(&mut self, ctx: &FileCtx, n: roxmltree::Node) -> Result<Element, SceneError> {
         let mut attrs = Vec::new();
         for a in n.attributes() {
-            let v = substitute(a.value(), params).map_err(|m| err(n, m))?;
+            let v = self.substitute(a.value()).map_err(|m| ctx.err(n, m))?;
             attrs.push((a.name().to_string(), v));
-        }
-        let mut children = Vec::new();
-        for c in n.children() {
-            if c.is_element() {
-                if c.tag_name().name() == "default" {
-                    continue;
-                }
-                children.push(convert(c, params, line_of, err)?);
-            } else if c.is_text() && !c.text().unwrap_or("").trim().is_empty() {
-                return Err(err(n, "unexpected text inside the element".into()));
-            }
         }
         Ok(Element {
             tag: n.tag_name().name().to_string(),
             attrs,
-            line: line_of(n),
-            children,
+            file: ctx.src.clone(),
+            line: ctx.line(n),
+            children: self.children(ctx, n, false)?,
         })
     }
-    convert(root, &params, &line_of, &err)
+
+    /// The children of `n` in document order, with defaults applied, includes spliced in and
+    /// `<path>` folders recorded (`top`: `n` is the scene element).
+    fn children(&mut self, ctx: &FileCtx, n: roxmltree::Node, top: bool) -> Result<Vec<Element>, SceneError> {
+        let mut out = Vec::new();
+        for c in n.children() {
+            if c.is_text() {
+                if !c.text().unwrap_or("").trim().is_empty() {
+                    return Err(ctx.err(n, "unexpected text inside the element".into()));
+                }
+                continue;
+            }
+            if !c.is_element() {
+                continue;
+            }
+            match c.tag_name().name() {
+                "default" => {
+                    let (Some(name), Some(value)) = (c.attribute("name"), c.attribute("value")) else {
+                        return Err(ctx.err(c, "a <default> needs name and value".into()));
+                    };
+                    if name.is_empty() {
+                        return Err(ctx.err(c, "a <default> needs a non-empty name".into()));
+                    }
+                    if !self.params.contains_key(name) {
+                        let value = self.substitute(value).map_err(|m| ctx.err(c, m))?;
+                        self.params.insert(name.to_string(), value);
+                    }
+                }
+                "path" => {
+                    if !top {
+                        return Err(ctx.err(c, "<path> can only be a child of the scene".into()));
+                    }
+                    let value = c
+                        .attribute("value")
+                        .ok_or_else(|| ctx.err(c, "a <path> needs a value".into()))?;
+                    let value = self.substitute(value).map_err(|m| ctx.err(c, m))?;
+                    let dir = ctx.dir().join(&value);
+                    if !dir.is_dir() {
+                        return Err(ctx.err(c, format!("folder \"{}\" not found", dir.display())));
+                    }
+                    self.search_dirs.insert(0, dir);
+                }
+                "include" => {
+                    let name = c
+                        .attribute("filename")
+                        .ok_or_else(|| ctx.err(c, "an <include> needs a filename".into()))?;
+                    let name = self.substitute(name).map_err(|m| ctx.err(c, m))?;
+                    if ctx.depth + 1 > MAX_INCLUDE_DEPTH {
+                        return Err(ctx.err(
+                            c,
+                            format!("includes nest more than {MAX_INCLUDE_DEPTH} deep (do they include each other?)"),
+                        ));
+                    }
+                    let path = [ctx.dir()]
+                        .into_iter()
+                        .chain(self.search_dirs.iter().cloned())
+                        .map(|d| d.join(&name))
+                        .find(|p| p.is_file())
+                        .ok_or_else(|| ctx.err(c, format!("included file \"{name}\" not found")))?;
+                    let text = std::fs::read_to_string(&path)
+                        .map_err(|e| ctx.err(c, format!("cannot read {}: {e}", path.display())))?;
+                    self.includes.push(path.clone());
+                    let mut included = self.file(&path, &text, ctx.depth + 1, false)?;
+                    if let Some(prop) = c.attribute("name")
+                        && let [one] = included.as_mut_slice()
+                    {
+                        one.attrs.retain(|(k, _)| k != "name");
+                        one.attrs.push(("name".into(), prop.to_string()));
+                    }
+                    out.extend(included);
+                }
+                _ => out.push(self.element(ctx, c)?),
+            }
+        }
+        Ok(out)
+    }
+
+    /// Replaces every `$name` by its parameter's value, noting which `-D` parameters are used.
+    fn substitute(&mut self, value: &str) -> Result<String, String> {
+        let out = substitute(value, &self.params)?;
+        if value.contains('$') {
+            for (k, used) in self.used.iter_mut() {
+                if !*used && value.contains(&format!("${k}")) {
+                    *used = true;
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The file being read, for errors and relative paths.
+struct FileCtx<'d, 'i> {
+    doc: &'d roxmltree::Document<'i>,
+    src: Arc<PathBuf>,
+    depth: u32,
+}
+
+impl FileCtx<'_, '_> {
+    fn line(&self, n: roxmltree::Node) -> u32 {
+        self.doc.text_pos_at(n.range().start).row
+    }
+
+    fn err(&self, n: roxmltree::Node, message: String) -> SceneError {
+        SceneError {
+            file: self.src.to_path_buf(),
+            line: self.line(n),
+            element: format!("<{}>", n.tag_name().name()),
+            message,
+        }
+    }
+
+    /// The folder of the file being read: includes and `<path>`s are relative to it.
+    fn dir(&self) -> PathBuf {
+        self.src
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+            .to_path_buf()
+    }
 }
 
 /// Replaces every `$name` by its parameter's value.
@@ -158,7 +335,9 @@ mod tests {
     fn substitutes_defaults_and_overrides() {
         let text = r#"<scene version="3.0.0"><default name="res" value="64"/><default name="w" value="$res"/>
             <film width="$w" height="$res"/></scene>"#;
-        let root = parse(Path::new("t.xml"), text, &[("res".into(), "32".into())]).unwrap();
+        let root = parse(Path::new("t.xml"), text, &[("res".into(), "32".into())])
+            .unwrap()
+            .root;
         let film = &root.children[0];
         // The override applies wherever $res is used, defaults built from it included.
         assert_eq!(film.attr("height"), Some("32"));
@@ -173,8 +352,31 @@ mod tests {
             r#"<scene version="3.0.0"><a v="$nope"/></scene>"#,
             &[],
         )
-        .unwrap_err();
+        .err()
+        .unwrap();
         assert!(e.to_string().contains("$nope"), "{e}");
+    }
+
+    #[test]
+    fn an_unused_define_is_an_error_and_defaults_follow_document_order() {
+        let text = r#"<scene version="3.0.0"><a v="1"/></scene>"#;
+        let e = parse(Path::new("t.xml"), text, &[("res".into(), "8".into())])
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("res=8"), "{e}");
+        // A default applies from where it stands, also nested, and a later one does not override.
+        let text = r#"<scene version="3.0.0"><b><default name="x" value="2"/></b>
+            <default name="x" value="3"/><a v="$x"/></scene>"#;
+        let root = parse(Path::new("t.xml"), text, &[]).unwrap().root;
+        assert_eq!(root.children[1].attr("v"), Some("2"));
+        let e = parse(
+            Path::new("t.xml"),
+            r#"<scene version="3.0.0"><a v="$y"/><default name="y" value="1"/></scene>"#,
+            &[],
+        )
+        .err()
+        .unwrap();
+        assert!(e.to_string().contains("$y"), "{e}");
     }
 
     #[test]
@@ -184,7 +386,8 @@ mod tests {
             "<scene version=\"3.0.0\">\n<a>\n</scene>",
             &[],
         )
-        .unwrap_err();
+        .err()
+        .unwrap();
         assert_eq!(e.line, 3, "{e}");
     }
 }
