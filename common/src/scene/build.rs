@@ -147,10 +147,10 @@ impl<'a> Builder<'a> {
             .iter()
             .filter(|e| e.tag == "emitter" && e.attr("type") == Some("area"))
         {
-            if let Some(id) = el.attr("id") {
-                if area_ids.insert(id.to_string(), el).is_some() || self.bsdf_ids.contains_key(id) {
-                    return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
-                }
+            if let Some(id) = el.attr("id")
+                && (area_ids.insert(id.to_string(), el).is_some() || self.bsdf_ids.contains_key(id))
+            {
+                return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
         }
         self.area_ids = area_ids.keys().cloned().collect();
