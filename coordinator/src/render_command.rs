@@ -38,6 +38,17 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     for w in &resolved.warnings {
         eprintln!("warning: {w}");
     }
+    let method = match &resolved.render.method {
+        Method::Path(_) => "path",
+        Method::Direct(_) => "direct",
+        Method::Sppm(_) => "sppm",
+    };
+    let source = if args.job.integrator.is_none() {
+        " (the scene's <integrator>)"
+    } else {
+        ""
+    };
+    eprintln!("method: {method}{source}");
     let (unit, radii_schedule) = match &resolved.render.method {
         Method::Path(_) | Method::Direct(_) => ("passes", None),
         Method::Sppm(s) => {
