@@ -27,3 +27,10 @@ fn direct_integrator_matches_mitsuba() {
 fn emitter_without_bsdf_is_black_and_tent_filter_matches_mitsuba() {
     check_declared_against_mitsuba("emitter-no-bsdf");
 }
+
+/// Rough materials without a `distribution`: Mitsuba's Beckmann, with its rational masking
+/// term and visible-normal sampling (rough conductors, `alpha_u` = `alpha_v`, rough plastic).
+#[test]
+fn beckmann_is_the_default_distribution_and_matches_mitsuba() {
+    check_declared_against_mitsuba("beckmann");
+}

@@ -79,7 +79,9 @@ pub enum JobError {
     #[error(transparent)]
     Sppm(#[from] SppmError),
     /// A parameter that does not apply to the method.
-    #[error("{0} applies to the sppm integrator only")]
+    #[error(
+        "{0} applies to the sppm integrator only (the method is the scene's <integrator> unless --integrator says otherwise)"
+    )]
     NotForPath(&'static str),
     /// Zero passes or a zero checkpoint interval.
     #[error("{0} must be at least 1")]

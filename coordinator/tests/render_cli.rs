@@ -199,7 +199,24 @@ fn bad_sppm_parameters_fail_clearly() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(needle), "expected \"{needle}\" in {err}");
     }
-    let o = run(&["render", s, "--out", "/tmp/never.exr", "--photons", "5"]);
+    let o = run(&[
+        "render",
+        s,
+        "--out",
+        "/tmp/never.exr",
+        "--integrator",
+        "path",
+        "--photons",
+        "5",
+    ]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--photons applies to --integrator sppm"));
+    // Without --integrator the scene's <integrator> (path here) decides, and says so.
+    let o = run(&["render", s, "--out", "/tmp/never.exr", "--photons", "5"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("photons applies to the sppm integrator only"),
+        "{err}"
+    );
 }

@@ -2,7 +2,7 @@ use glam::{Vec2, Vec3A};
 
 use super::BsdfSample;
 use super::fresnel::{fresnel_conductor, reflect, reflect_about};
-use super::microfacet::Ggx;
+use super::microfacet::Microfacet;
 use crate::color::Rgb;
 
 /// A metal: smooth (a perfect mirror with conductor Fresnel) or rough (GGX).
@@ -15,7 +15,7 @@ pub struct Conductor {
     /// Extra tint, Mitsuba's `specular_reflectance`.
     pub specular: Rgb,
     /// None for the smooth mirror.
-    pub roughness: Option<Ggx>,
+    pub roughness: Option<Microfacet>,
 }
 
 impl Conductor {

@@ -12,7 +12,7 @@ mod plastic;
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
-pub use microfacet::Ggx;
+pub use microfacet::{Distribution, Microfacet};
 pub use plastic::Plastic;
 
 use glam::{Vec2, Vec3A};

@@ -4,7 +4,7 @@ use glam::{Vec2, Vec3A};
 
 use super::BsdfSample;
 use super::fresnel::{diffuse_fresnel_reflectance, fresnel_dielectric, reflect, reflect_about};
-use super::microfacet::Ggx;
+use super::microfacet::Microfacet;
 use crate::color::{Rgb, mean};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
 
@@ -24,7 +24,7 @@ pub struct Plastic {
     /// reflections.
     pub nonlinear: bool,
     /// None for the smooth coating.
-    pub roughness: Option<Ggx>,
+    pub roughness: Option<Microfacet>,
     /// Probability weight of sampling the coating, from the mean reflectances (as Mitsuba).
     specular_weight: f32,
     /// Fraction of the diffuse light that the coating reflects back inside.
@@ -37,26 +37,30 @@ const TABLE_SIZE: usize = 64;
 
 impl Plastic {
     /// A plastic; for a rough coating, its transmittance is integrated numerically here.
-    pub fn new(diffuse: Rgb, specular: Rgb, eta: f32, nonlinear: bool, roughness: Option<Ggx>) -> Self {
+    pub fn new(
+        diffuse: Rgb,
+        specular: Rgb,
+        eta: f32,
+        nonlinear: bool,
+        roughness: Option<Microfacet>,
+    ) -> Self {
         let (d, s) = (mean(diffuse), mean(specular));
         let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
         let (internal_reflectance, transmittance_table) = match roughness {
             None => (diffuse_fresnel_reflectance(1.0 / eta), Vec::new()),
-            Some(ggx) => {
-                let table: Vec<f32> = (0..TABLE_SIZE)
-                    .map(|i| {
-                        let mu = (i as f32 / (TABLE_SIZE - 1) as f32).max(1e-3);
-                        1.0 - rough_albedo(ggx, eta, mu)
-                    })
+            Some(mf) => {
+                // Mitsuba's tables: cos θ at 64 equal steps from 0 to 1 (0 nudged to 1e-6).
+                let mus: Vec<f32> = (0..TABLE_SIZE)
+                    .map(|i| (i as f32 / (TABLE_SIZE - 1) as f32).max(1e-6))
                     .collect();
-                // Internal: light leaving the base sees the coating from inside (eta inverted).
-                let n = 64;
-                let mut avg = 0.0;
-                for i in 0..n {
-                    let mu = (i as f32 + 0.5) / n as f32;
-                    avg += 2.0 * mu * rough_albedo(ggx, 1.0 / eta, mu) / n as f32;
-                }
-                (avg, table)
+                let table = mus.iter().map(|&mu| rough_transmittance(mf, eta, mu)).collect();
+                // Internal: light leaving the base meets the coating from inside (eta inverted),
+                // averaged over the cosine-weighted hemisphere.
+                let sum: f32 = mus
+                    .iter()
+                    .map(|&mu| rough_reflectance(mf, 1.0 / eta, mu) * mu)
+                    .sum();
+                (2.0 * sum / TABLE_SIZE as f32, table)
             }
         };
         Plastic {
@@ -180,25 +184,44 @@ impl Plastic {
     }
 }
 
-/// Directional albedo of a rough dielectric interface's reflection, by midpoint quadrature.
-///
-/// Mitsuba tabulates the same quantity from a precomputed data file; computing it here keeps
-/// the model self-contained. The coating's transmittance is taken as one minus this albedo.
-fn rough_albedo(ggx: Ggx, eta: f32, mu: f32) -> f32 {
+/// Quadrature points per axis over the visible-normal sample square: Mitsuba's counts (a
+/// coating seen from outside varies slowly; from inside, total internal reflection makes the
+/// integrand steep).
+fn quadrature_points(eta: f32) -> usize {
+    if eta > 1.0 { 32 } else { 128 }
+}
+
+/// The mean over visible microfacet normals (sampled from a grid on the unit square, so that
+/// any roughness, however small, is integrated accurately) of `f(m)`.
+fn visible_normal_mean(mf: Microfacet, mu: f32, eta: f32, f: impl Fn(Vec3A, Vec3A) -> f32) -> f32 {
     let wi = Vec3A::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
-    let (nt, np) = (48, 96);
-    let mut sum = 0.0;
-    for i in 0..nt {
-        let cos_o = (i as f32 + 0.5) / nt as f32;
-        let sin_o = (1.0 - cos_o * cos_o).sqrt();
-        for j in 0..np {
-            let phi = (j as f32 + 0.5) / np as f32 * std::f32::consts::TAU;
-            let wo = Vec3A::new(sin_o * phi.cos(), sin_o * phi.sin(), cos_o);
-            let m = (wi + wo).normalize();
-            let f = fresnel_dielectric(wi.dot(m), eta).0;
-            // The integrand is f·cos θo over dω = dcos θo dφ; f·cos θo is F·D·G / (4 cos θi).
-            sum += f * ggx.d(m) * ggx.g(wi, wo, m) / (4.0 * mu);
+    let n = quadrature_points(eta);
+    let mut sum = 0.0f64;
+    for i in 0..n {
+        for j in 0..n {
+            let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+            sum += f(wi, mf.sample_visible(wi, u)) as f64;
         }
     }
-    (sum * std::f32::consts::TAU / (nt * np) as f32).clamp(0.0, 1.0)
+    (sum / (n * n) as f64) as f32
+}
+
+/// Fraction of light arriving at cos θ = `mu` that a rough dielectric interface (relative index
+/// `eta`) transmits, counting the refracted light's masking: Mitsuba's `eval_transmittance`.
+fn rough_transmittance(mf: Microfacet, eta: f32, mu: f32) -> f32 {
+    visible_normal_mean(mf, mu, eta, |wi, m| {
+        let cos_im = wi.dot(m);
+        let (f, cos_t, _, eta_ti) = fresnel_dielectric(cos_im, eta);
+        let wt = m * (cos_im * eta_ti + cos_t) - wi * eta_ti;
+        (1.0 - f) * mf.g1(wt, m)
+    })
+}
+
+/// Fraction of light arriving at cos θ = `mu` that a rough dielectric interface reflects,
+/// counting the reflected light's masking: Mitsuba's `eval_reflectance`.
+fn rough_reflectance(mf: Microfacet, eta: f32, mu: f32) -> f32 {
+    visible_normal_mean(mf, mu, eta, |wi, m| {
+        let f = fresnel_dielectric(wi.dot(m), eta).0;
+        f * mf.g1(reflect_about(wi, m), m)
+    })
 }

@@ -8,22 +8,30 @@ use super::*;
 use crate::sampling::{Sampler, Stream};
 
 fn conductor(alpha: Option<f32>) -> Bsdf {
+    conductor_with(Distribution::Ggx, alpha)
+}
+
+fn conductor_with(distribution: Distribution, alpha: Option<f32>) -> Bsdf {
     Bsdf::Conductor(Conductor {
         // Gold, from Mitsuba's table.
         eta: Rgb::new(0.143036, 0.375307, 1.442045),
         k: Rgb::new(3.982997, 2.385556, 1.603359),
         specular: Rgb::ONE,
-        roughness: alpha.map(|alpha| Ggx { alpha }),
+        roughness: alpha.map(|alpha| Microfacet { distribution, alpha }),
     })
 }
 
 fn plastic(alpha: Option<f32>, diffuse: f32) -> Bsdf {
+    plastic_with(Distribution::Ggx, alpha, diffuse)
+}
+
+fn plastic_with(distribution: Distribution, alpha: Option<f32>, diffuse: f32) -> Bsdf {
     Bsdf::Plastic(Box::new(Plastic::new(
         Rgb::splat(diffuse),
         Rgb::ONE,
         1.49,
         false,
-        alpha.map(|alpha| Ggx { alpha }),
+        alpha.map(|alpha| Microfacet { distribution, alpha }),
     )))
 }
 
@@ -47,6 +55,18 @@ fn cases() -> Vec<(&'static str, Bsdf)> {
         ("diffuse", diffuse(0.7)),
         ("rough conductor 0.1", conductor(Some(0.1))),
         ("rough conductor 0.5", conductor(Some(0.5))),
+        (
+            "beckmann conductor 0.1",
+            conductor_with(Distribution::Beckmann, Some(0.1)),
+        ),
+        (
+            "beckmann conductor 0.6",
+            conductor_with(Distribution::Beckmann, Some(0.6)),
+        ),
+        (
+            "beckmann plastic 0.3",
+            plastic_with(Distribution::Beckmann, Some(0.3), 0.5),
+        ),
         ("plastic", plastic(None, 0.5)),
         ("rough plastic 0.2", plastic(Some(0.2), 0.5)),
         ("rough plastic 0.6", plastic(Some(0.6), 0.8)),
@@ -83,7 +103,7 @@ fn bin_of(w: Vec3A) -> usize {
 
 /// Expected probability of each (cos θ, φ) bin: the pdf integrated by a fine midpoint rule.
 fn expected_probabilities(b: &Bsdf, wi: Vec3A) -> Vec<f64> {
-    let sub = 12;
+    let sub = 32;
     let mut out = vec![0.0f64; THETA_BINS * PHI_BINS];
     let (dz, dphi) = (2.0 / THETA_BINS as f32, 2.0 * PI / PHI_BINS as f32);
     for t in 0..THETA_BINS {

@@ -5,7 +5,7 @@ use glam::{Vec2, Vec3A};
 use super::{EmittedPhoton, LightSample};
 use crate::color::{Rgb, luminance};
 use crate::geometry::Frame;
-use crate::geometry::Primitive;
+use crate::geometry::{Primitive, Sphere};
 use crate::sampling::{Distribution1D, square_to_cosine_hemisphere};
 
 /// A shape that emits constant radiance from its front side (Mitsuba's `area` emitter).
@@ -19,6 +19,10 @@ pub struct AreaLight {
     pub area_distribution: Distribution1D,
     /// Total area.
     pub area: f32,
+    /// The sphere, when the light is one whole outward-facing sphere: seen from outside it is
+    /// sampled within the cone it subtends, as Mitsuba does, rather than by area (which wastes
+    /// the half of the samples that land on its far side and is far noisier for small spheres).
+    pub sphere: Option<Sphere>,
 }
 
 impl AreaLight {
@@ -26,12 +30,35 @@ impl AreaLight {
     pub fn new(radiance: Rgb, prims: Vec<u32>, all: &[Primitive]) -> AreaLight {
         let areas: Vec<f32> = prims.iter().map(|&i| all[i as usize].area()).collect();
         let area_distribution = Distribution1D::new(&areas);
+        let sphere = match prims.as_slice() {
+            [one] => match &all[*one as usize] {
+                Primitive::Sphere(s) if !s.flip => Some(s.clone()),
+                _ => None,
+            },
+            _ => None,
+        };
         AreaLight {
             radiance,
             area: area_distribution.total(),
             prims,
             area_distribution,
+            sphere,
         }
+    }
+
+    /// For a sphere light seen from `p` outside it: the cone's axis, the distance to the
+    /// centre and 1 - cos of the cone's half-angle (computed from sin² to keep its precision
+    /// for small, distant spheres).
+    fn cone(&self, p: Vec3A) -> Option<(&Sphere, Vec3A, f32, f32)> {
+        let s = self.sphere.as_ref()?;
+        let to_c = s.center - p;
+        let dc = to_c.length();
+        if dc <= s.radius * 1.0001 {
+            return None;
+        }
+        let sin2 = (s.radius / dc).powi(2);
+        let one_minus_cos = sin2 / (1.0 + (1.0 - sin2).max(0.0).sqrt());
+        Some((s, to_c / dc, dc, one_minus_cos))
     }
 
     /// Radiance leaving the surface with normal `n` in direction `w`: only the front emits.
@@ -41,6 +68,9 @@ impl AreaLight {
 
     /// Density per unit solid angle of sampling `p_light` (normal `n`) from `p`.
     pub fn pdf_li(&self, p: Vec3A, p_light: Vec3A, n: Vec3A) -> f32 {
+        if let Some((_, _, _, one_minus_cos)) = self.cone(p) {
+            return 1.0 / (2.0 * PI * one_minus_cos);
+        }
         let d = p_light - p;
         let dist2 = d.length_squared();
         let cos = n.dot(-d).abs() / dist2.sqrt();
@@ -54,8 +84,23 @@ impl AreaLight {
         if self.area_distribution.is_empty() {
             return None;
         }
-        let (i, _, ux) = self.area_distribution.sample(u.x);
-        let sp = prims[self.prims[i] as usize].sample_point(Vec2::new(ux, u.y));
+        let sp = match self.cone(p) {
+            Some((sphere, axis, dc, one_minus_cos)) => {
+                // A direction uniform in the cone, and where it first meets the sphere.
+                let cos = 1.0 - u.x * one_minus_cos;
+                let sin = (1.0 - cos * cos).max(0.0).sqrt();
+                let phi = 2.0 * PI * u.y;
+                let dir =
+                    Frame::from_normal(axis).to_world(Vec3A::new(sin * phi.cos(), sin * phi.sin(), cos));
+                let r2 = sphere.radius * sphere.radius;
+                let t = dc * cos - (r2 - dc * dc * sin * sin).max(0.0).sqrt();
+                sphere.surface(p + dir * t)
+            }
+            None => {
+                let (i, _, ux) = self.area_distribution.sample(u.x);
+                prims[self.prims[i] as usize].sample_point(Vec2::new(ux, u.y))
+            }
+        };
         let d = sp.p - p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {

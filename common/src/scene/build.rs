@@ -10,7 +10,7 @@ use super::named;
 use super::props::{Ctx, FileRoot, Props, Res};
 use super::xml::{self, Element};
 use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
-use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Ggx, Plastic};
+use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::filter::Filter;
@@ -46,6 +46,7 @@ pub(super) fn from_str(
         dir: dir.to_path_buf(),
         search_dirs: parsed.search_dirs,
         root,
+        files: Default::default(),
     };
     let mut builder = Builder::new(&ctx);
     for inc in &parsed.includes {
@@ -226,6 +227,8 @@ impl<'a> Builder<'a> {
             .count();
         let powers: Vec<f32> = self.lights.iter().map(Light::power).collect();
         let light_selection = Distribution1D::new(&powers);
+        let emitting: Vec<f32> = powers.iter().map(|&p| if p > 0.0 { 1.0 } else { 0.0 }).collect();
+        let light_sampling = Distribution1D::new(&emitting);
         if !self.lights.is_empty() && light_selection.is_empty() {
             self.warnings
                 .push("every light has zero power: the image will be black".into());
@@ -240,12 +243,13 @@ impl<'a> Builder<'a> {
             media: self.media,
             camera_medium: self.camera_medium,
             light_selection,
+            light_sampling,
             camera,
             filter,
             spp,
             integrator,
             warnings: self.warnings,
-            files: self.files,
+            files: self.files.into_iter().chain(ctx.files.take()).collect(),
             null_shapes,
         })
     }
@@ -722,7 +726,7 @@ impl<'a> Builder<'a> {
                     k,
                     specular: p.reflectance("specular_reflectance", Rgb::ONE)?,
                     roughness: if kind == "roughconductor" {
-                        Some(self.ggx(&p)?)
+                        Some(self.microfacet(&p)?)
                     } else {
                         None
                     },
@@ -735,7 +739,7 @@ impl<'a> Builder<'a> {
             }),
             kind @ ("plastic" | "roughplastic") => {
                 let roughness = if kind == "roughplastic" {
-                    Some(self.ggx(&p)?)
+                    Some(self.microfacet(&p)?)
                 } else {
                     None
                 };
@@ -795,38 +799,39 @@ impl<'a> Builder<'a> {
         Ok(bsdf)
     }
 
-    /// GGX roughness. Mitsuba's default distribution is Beckmann, which we do not model: a
-    /// scene must ask for GGX so that it renders the same in both.
-    fn ggx(&self, p: &Props) -> Res<Ggx> {
-        match p.string("distribution")? {
-            Some("ggx") => {}
+    /// A rough material's microfacets: Mitsuba's `distribution` (default Beckmann) and `alpha`
+    /// (default 0.1, at least 1e-4 as Mitsuba clamps it).
+    fn microfacet(&self, p: &Props) -> Res<Microfacet> {
+        let distribution = match p.string("distribution")?.map(str::to_ascii_lowercase).as_deref() {
+            None | Some("beckmann") => Distribution::Beckmann,
+            Some("ggx") => Distribution::Ggx,
             Some(d) => {
                 return Err(p.err_at(
                     "distribution",
-                    format!("distribution \"{d}\" is not supported; use ggx"),
+                    format!("distribution \"{d}\" is not supported (beckmann, ggx)"),
                 ));
             }
-            None => {
+        };
+        let alpha = match (p.float("alpha")?, p.float("alpha_u")?, p.float("alpha_v")?) {
+            (Some(a), None, None) => a,
+            (None, None, None) => 0.1,
+            (None, Some(u), Some(v)) if u == v => u,
+            (None, Some(_), Some(_)) => {
                 return Err(self.ctx.err(
                     p.el,
-                    "set <string name=\"distribution\" value=\"ggx\"/>: Mitsuba's default (beckmann) is not supported",
+                    "anisotropic roughness (alpha_u different from alpha_v) is not supported",
                 ));
             }
-        }
-        if p.float("alpha_u")?.is_some() || p.float("alpha_v")?.is_some() {
-            return Err(self.ctx.err(
-                p.el,
-                "anisotropic roughness (alpha_u, alpha_v) is not supported; use alpha",
-            ));
-        }
-        let alpha = p.float_or("alpha", 0.1)?;
-        if !(alpha > 0.0 && alpha <= 1.0) {
-            return Err(p.err_at("alpha", format!("alpha must lie in (0, 1], not {alpha}")));
+            _ => return Err(self.ctx.err(p.el, "give alpha, or both alpha_u and alpha_v")),
+        };
+        if alpha.is_nan() || alpha < 0.0 {
+            return Err(p.err_at("alpha", format!("alpha cannot be negative, not {alpha}")));
         }
         if p.boolean("sample_visible")? == Some(false) {
             return Err(p.err_at("sample_visible", "sample_visible=false is not supported".into()));
         }
-        Ok(Ggx {
+        Ok(Microfacet {
+            distribution,
             alpha: alpha.max(1e-4),
         })
     }
@@ -883,7 +888,6 @@ impl<'a> Builder<'a> {
                     .string("filename")?
                     .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
                 let path = p.resolve_file("filename", name)?;
-                self.files.push(path.clone());
                 let mut m = if kind == "obj" {
                     mesh::load_obj(&path)
                 } else {

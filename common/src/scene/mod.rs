@@ -10,6 +10,7 @@ mod error;
 mod mesh;
 mod named;
 mod props;
+mod spectrum;
 mod transform;
 mod xml;
 
@@ -89,8 +90,12 @@ pub struct Scene {
     pub media: Vec<crate::medium::Medium>,
     /// The medium the camera is in.
     pub camera_medium: Option<u32>,
-    /// Chooses a light in proportion to its power.
+    /// Chooses a light in proportion to its power: where photons start.
     pub light_selection: Distribution1D,
+    /// Chooses a light for next-event estimation: uniformly among those that emit, as Mitsuba
+    /// does. (By power, a bright light outside the view would take nearly every sample from the
+    /// dim ones that light what is seen, as in Veach's scene of four lights.)
+    pub light_sampling: Distribution1D,
     /// The sensor.
     pub camera: Camera,
     /// The film's reconstruction filter.
@@ -231,10 +236,10 @@ impl Scene {
 
     /// Picks a light by power and samples it from `p`; the pdf includes the choice.
     pub fn sample_light(&self, p: Vec3A, u_select: f32, u: glam::Vec2) -> Option<(u32, LightSample)> {
-        if self.light_selection.is_empty() {
+        if self.light_sampling.is_empty() {
             return None;
         }
-        let (i, pmf, _) = self.light_selection.sample(u_select);
+        let (i, pmf, _) = self.light_sampling.sample(u_select);
         let mut ls = self.lights[i].sample_li(p, self.bvh.primitives(), u)?;
         ls.pdf *= pmf;
         Some((i as u32, ls))
@@ -243,7 +248,7 @@ impl Scene {
     /// Density of [`Scene::sample_light`] returning point `sp` on area light `light`, from `p`.
     pub fn light_pdf(&self, light: u32, p: Vec3A, sp: &SurfacePoint) -> f32 {
         match &self.lights[light as usize] {
-            Light::Area(a) => self.light_selection.pmf(light as usize) * a.pdf_li(p, sp.p, sp.ng),
+            Light::Area(a) => self.light_sampling.pmf(light as usize) * a.pdf_li(p, sp.p, sp.ng),
             _ => 0.0,
         }
     }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use glam::{Mat4, Vec3A};
 
 use super::SceneError;
+use super::spectrum::{self, SpectrumUse};
 use super::transform::parse_transform;
 use super::xml::Element;
 use crate::color::Rgb;
@@ -27,6 +28,8 @@ pub(crate) struct Ctx {
     /// `<path>` folders, searched before the scene's folder.
     pub search_dirs: Vec<PathBuf>,
     pub root: FileRoot,
+    /// Every file resolved so far (meshes, spectra): what a job's bundle must carry.
+    pub files: std::cell::RefCell<Vec<PathBuf>>,
 }
 
 impl Ctx {
@@ -194,18 +197,46 @@ impl<'a> Props<'a> {
         }
     }
 
-    /// A colour: `<rgb>`, a single-valued `<spectrum>` (grey) or a `<float>`.
+    /// A colour that is not a reflectance or an emission (conductors' `eta` and `k`, media):
+    /// `<rgb>`, `<float>` or `<spectrum>` (a single value is grey; lists and `.spd` files are
+    /// converted as Mitsuba's RGB variants do, D65-weighted, negatives clipped).
     pub fn rgb(&self, name: &str) -> Res<Option<Rgb>> {
+        self.color(name, SpectrumUse::Unbounded)
+    }
+
+    fn color(&self, name: &str, use_: SpectrumUse) -> Res<Option<Rgb>> {
         let Some(el) = self.take(name, &["rgb", "spectrum", "float"])? else {
             return Ok(None);
         };
-        let s = self.value_attr(el)?;
-        if el.tag == "spectrum" && s.contains(':') {
-            return Err(self.ctx.err(
-                el,
-                "only single-valued spectra are supported (rendering is RGB); use <rgb>",
-            ));
+        if el.tag == "spectrum" {
+            let (wavelengths, values) = match (el.attr("filename"), el.attr("value")) {
+                (Some(f), None) => {
+                    let path = self.resolve_file_of(el, f)?;
+                    spectrum::read_spd(&path)
+                        .map_err(|m| self.ctx.err(el, format!("{}: {m}", path.display())))?
+                }
+                (None, Some(v)) if v.contains(':') => {
+                    spectrum::parse_list(v).map_err(|m| self.ctx.err(el, m))?
+                }
+                (None, Some(v)) => {
+                    // A flat spectrum: grey, except as emitted light (see `emission`).
+                    let g = self.parse_f32(el, v)?;
+                    let flat = if use_ == SpectrumUse::Emission {
+                        FLAT_SPECTRUM_RGB
+                    } else {
+                        Rgb::ONE
+                    };
+                    return Ok(Some(flat * g));
+                }
+                _ => {
+                    return Err(self
+                        .ctx
+                        .err(el, "a <spectrum> needs a value or a filename, not both"));
+                }
+            };
+            return Ok(Some(spectrum::to_rgb(&wavelengths, &values, use_)));
         }
+        let s = self.value_attr(el)?;
         let v = self.parse_list(el, s)?;
         match v.as_slice() {
             [g] => Ok(Some(Rgb::splat(*g))),
@@ -216,22 +247,25 @@ impl<'a> Props<'a> {
         }
     }
 
-    /// A colour with every channel in [0, 1]: a reflectance cannot create energy.
+    /// A colour with every channel in [0, 1]: a reflectance cannot create energy. Spectra are
+    /// weighted by D65 and clamped into range, as Mitsuba does.
     pub fn reflectance(&self, name: &str, default: Rgb) -> Res<Rgb> {
-        let v = self.rgb(name)?.unwrap_or(default);
+        let v = self.color(name, SpectrumUse::Reflectance)?.unwrap_or(default);
         if v.min_element() < 0.0 || v.max_element() > 1.0 {
             return Err(self.err_at(name, format!("'{name}' must lie in [0, 1], not {v}")));
         }
         Ok(v)
     }
 
-    /// Emitted light (radiance, intensity): a colour with no negative channel. A single-valued
-    /// `<spectrum>` is a flat spectrum, whose colour in Mitsuba's RGB variants is not grey: its
-    /// sRGB coordinates against the D65 white are v · xyz_to_srgb(1, 1, 1).
+    /// Emitted light (radiance, intensity): a colour with no negative channel. Spectra are not
+    /// weighted by D65, and a single-valued `<spectrum>` is a flat spectrum, whose colour in
+    /// Mitsuba's RGB variants is not grey: v · xyz_to_srgb(1, 1, 1).
     pub fn emission(&self, name: &str, default: Rgb) -> Res<Rgb> {
-        let flat = self.tag_of(name) == Some("spectrum");
-        let v = self.non_negative_rgb(name, default)?;
-        Ok(if flat { v * FLAT_SPECTRUM_RGB } else { v })
+        let v = self.color(name, SpectrumUse::Emission)?.unwrap_or(default);
+        if v.min_element() < 0.0 {
+            return Err(self.err_at(name, format!("'{name}' cannot be negative: {v}")));
+        }
+        Ok(v)
     }
 
     /// A colour with no negative channel.
@@ -319,6 +353,17 @@ impl<'a> Props<'a> {
     /// last given first), then the scene's folder; absolute names and `..` are allowed. Inside
     /// a bundle the file must also lie inside the bundle's folder, links followed.
     pub fn resolve_file(&self, param: &str, name: &str) -> Res<PathBuf> {
+        let el = self
+            .values
+            .iter()
+            .find(|(n, _, _)| *n == param)
+            .map_or(self.el, |(_, el, _)| *el);
+        self.resolve_file_of(el, name)
+    }
+
+    /// [`Props::resolve_file`] for a file named by element `el`; records it as a file the
+    /// scene reads.
+    fn resolve_file_of(&self, el: &Element, name: &str) -> Res<PathBuf> {
         let candidates: Vec<PathBuf> = if Path::new(name).is_absolute() {
             vec![PathBuf::from(name)]
         } else {
@@ -331,23 +376,23 @@ impl<'a> Props<'a> {
         };
         let Some(found) = candidates.iter().find(|p| p.is_file()) else {
             let searched: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
-            return Err(self.err_at(
-                param,
+            return Err(self.ctx.err(
+                el,
                 format!("file \"{name}\" not found (looked for {})", searched.join(", ")),
             ));
         };
         let real = found
             .canonicalize()
-            .map_err(|e| self.err_at(param, format!("{}: {e}", found.display())))?;
+            .map_err(|e| self.ctx.err(el, format!("{}: {e}", found.display())))?;
         if let FileRoot::Inside(root) = &self.ctx.root {
             let inside = root.canonicalize().is_ok_and(|r| real.starts_with(r));
             if !inside {
-                return Err(self.err_at(
-                    param,
-                    format!("file \"{name}\" resolves outside the job's bundle"),
-                ));
+                return Err(self
+                    .ctx
+                    .err(el, format!("file \"{name}\" resolves outside the job's bundle")));
             }
         }
+        self.ctx.files.borrow_mut().push(real.clone());
         Ok(real)
     }
 }
