@@ -79,11 +79,17 @@ fn unknown_element() {
     );
     expect_error(
         &scene_text(
-            "<shape type=\"sphere\"><bsdf type=\"roughconductor\"/></shape>",
+            "<shape type=\"sphere\"><bsdf type=\"roughconductor\">\n<string name=\"distribution\" value=\"phong\"/></bsdf></shape>",
             FILM,
         ),
+        9,
+        "distribution \"phong\" is not supported (beckmann, ggx)",
+    );
+    // An unsupported value of a supported parameter, and an unsupported element type.
+    expect_error(
+        &scene_text("<integrator type=\"bdpt\"/>", FILM),
         8,
-        "beckmann",
+        "integrator type \"bdpt\" is not supported",
     );
 }
 

@@ -34,3 +34,10 @@ fn emitter_without_bsdf_is_black_and_tent_filter_matches_mitsuba() {
 fn beckmann_is_the_default_distribution_and_matches_mitsuba() {
     check_declared_against_mitsuba("beckmann");
 }
+
+/// Mitsuba's `serialized` meshes (with and without normals, `shape_index`), and smooth normals
+/// computed for a mesh file that has none, as Mitsuba does.
+#[test]
+fn serialized_meshes_and_computed_normals_match_mitsuba() {
+    check_declared_against_mitsuba("serialized");
+}

@@ -861,6 +861,8 @@ impl<'a> Builder<'a> {
         let kind = p.kind()?;
         let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
         let flip = p.boolean("flip_normals")?.unwrap_or(false);
+        let is_file = matches!(kind, "obj" | "ply" | "serialized");
+        let mut face_normals = false;
         let mesh = match kind {
             "sphere" => {
                 let center = p.point("center")?.unwrap_or(Vec3A::ZERO);
@@ -883,18 +885,25 @@ impl<'a> Builder<'a> {
             "rectangle" => Some(mesh::rectangle()),
             "cube" => Some(mesh::cube()),
             "disk" => Some(mesh::disk()),
-            "obj" | "ply" => {
+            "obj" | "ply" | "serialized" => {
                 let name = p
                     .string("filename")?
                     .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
                 let path = p.resolve_file("filename", name)?;
-                let mut m = if kind == "obj" {
-                    mesh::load_obj(&path)
-                } else {
-                    mesh::load_ply(&path)
+                let mut m = match kind {
+                    "obj" => mesh::load_obj(&path),
+                    "ply" => mesh::load_ply(&path),
+                    _ => {
+                        let index = p.int("shape_index")?.unwrap_or(0);
+                        if !(0..=u32::MAX as i64).contains(&index) {
+                            return Err(p.err_at("shape_index", format!("shape_index cannot be {index}")));
+                        }
+                        mesh::load_serialized(&path, index as u32)
+                    }
                 }
                 .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
-                if p.boolean("face_normals")?.unwrap_or(false) {
+                face_normals = p.boolean("face_normals")?.unwrap_or(false);
+                if face_normals {
                     m.normals = None;
                 }
                 m.validate()
@@ -908,13 +917,18 @@ impl<'a> Builder<'a> {
                 return Err(self.ctx.err(
                     el,
                     format!(
-                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply)"
+                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply, serialized)"
                     ),
                 ));
             }
         };
         if let Some(mesh) = mesh {
-            self.push_mesh(mesh.transformed(&to_world), index, flip);
+            let mut mesh = mesh.transformed(&to_world);
+            // Mitsuba smooths a mesh file that has no normals, unless told to use face normals.
+            if is_file && mesh.normals.is_none() && !face_normals {
+                mesh.recompute_vertex_normals();
+            }
+            self.push_mesh(mesh, index, flip);
         }
 
         let (interior, exterior, _) = self.media_of(&p, true)?;

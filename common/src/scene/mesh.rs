@@ -1,4 +1,5 @@
-//! Triangle meshes: Mitsuba's built-in rectangle, cube and disk, and OBJ and PLY files.
+//! Triangle meshes: Mitsuba's built-in rectangle, cube and disk, and OBJ, PLY and Mitsuba's
+//! `serialized` files.
 
 use std::f32::consts::PI;
 use std::path::Path;
@@ -27,6 +28,33 @@ impl Mesh {
             }
         }
         self
+    }
+
+    /// Smooth vertex normals for a mesh file that has none, as Mitsuba computes them (in world
+    /// space): each face's normal weighted by its angle at the vertex (Thürmer and Wüthrich).
+    /// Without them a curved mesh would look faceted in ours and smooth in Mitsuba.
+    pub fn recompute_vertex_normals(&mut self) {
+        let mut normals = vec![Vec3A::ZERO; self.positions.len()];
+        for t in &self.triangles {
+            let v = t.map(|i| self.positions[i as usize]);
+            let n = (v[1] - v[0]).cross(v[2] - v[0]);
+            if n.length_squared() <= 0.0 || !n.is_finite() {
+                continue;
+            }
+            let n = n.normalize();
+            for j in 0..3 {
+                let (a, b) = (
+                    (v[(j + 1) % 3] - v[j]).normalize(),
+                    (v[(j + 2) % 3] - v[j]).normalize(),
+                );
+                normals[t[j] as usize] += n * a.dot(b).clamp(-1.0, 1.0).acos();
+            }
+        }
+        for n in &mut normals {
+            // Mitsuba's stand-in for a vertex no face defines a normal at.
+            *n = n.try_normalize().unwrap_or(Vec3A::X);
+        }
+        self.normals = Some(normals);
     }
 
     /// Index and value checks, so that a broken file fails at load and not in the renderer.
@@ -184,6 +212,130 @@ pub(crate) fn load_ply(path: &Path) -> Result<Mesh, String> {
         }
     }
     Ok(mesh)
+}
+
+/// Mesh `shape_index` of a Mitsuba `serialized` file (format versions 3 and 4): each mesh is a
+/// 0x041C header, a version and a zlib stream; a table of mesh offsets ends the file.
+pub(crate) fn load_serialized(path: &Path, shape_index: u32) -> Result<Mesh, String> {
+    use std::io::Read;
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
+    let u16_at = |o: usize| bytes.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let u32_at = |o: usize| {
+        bytes
+            .get(o..o + 4)
+            .map(|b| u32::from_le_bytes(b.try_into().unwrap()))
+    };
+    let u64_at = |o: usize| {
+        bytes
+            .get(o..o + 8)
+            .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+    };
+    let bad = || "not a Mitsuba serialized mesh (truncated or damaged)".to_string();
+    let (magic, version) = (u16_at(0).ok_or_else(bad)?, u16_at(2).ok_or_else(bad)?);
+    if magic != 0x041C {
+        return Err("not a Mitsuba serialized mesh (its header is not 0x041C)".into());
+    }
+    if !matches!(version, 3 | 4) {
+        return Err(format!(
+            "serialized format version {version} is not supported (3, 4)"
+        ));
+    }
+    let count = u32_at(bytes.len().checked_sub(4).ok_or_else(bad)?).ok_or_else(bad)?;
+    if shape_index >= count {
+        return Err(format!(
+            "shape_index {shape_index} is out of range: the file holds {count} meshes"
+        ));
+    }
+    let offset = if shape_index == 0 {
+        0
+    } else if version == 4 {
+        let at = bytes.len() - 4 - 8 * (count - shape_index) as usize;
+        u64_at(at).ok_or_else(bad)? as usize
+    } else {
+        let at = bytes.len() - 4 * (count - shape_index + 1) as usize;
+        u32_at(at).ok_or_else(bad)? as usize
+    };
+    if u16_at(offset) != Some(0x041C) {
+        return Err(bad());
+    }
+    let stream = bytes.get(offset + 4..).ok_or_else(bad)?;
+    let mut data = Vec::new();
+    flate2::read::ZlibDecoder::new(stream)
+        .read_to_end(&mut data)
+        .map_err(|e| format!("cannot decompress mesh {shape_index}: {e}"))?;
+    let mut r = Cursor { data: &data, at: 0 };
+    let flags = r.u32()?;
+    if version == 4 {
+        // The shape's name, NUL-terminated.
+        while r.bytes(1)?[0] != 0 {}
+    }
+    let (vertices, faces) = (r.u64()? as usize, r.u64()? as usize);
+    let double = flags & 0x2000 != 0;
+    // Each count must fit in what was decompressed before anything is allocated for it.
+    let scalar = if double { 8 } else { 4 };
+    let per_vertex = scalar
+        * (3 + 3 * (flags & 1 != 0) as usize + 2 * (flags & 2 != 0) as usize + 3 * (flags & 8 != 0) as usize);
+    let need = vertices
+        .checked_mul(per_vertex)
+        .and_then(|v| v.checked_add(faces.checked_mul(12)?));
+    if need.is_none_or(|n| n > data.len() - r.at) {
+        return Err(format!("mesh {shape_index} claims more data than the file holds"));
+    }
+    let vec3s = |r: &mut Cursor| -> Result<Vec<Vec3A>, String> {
+        (0..vertices)
+            .map(|_| Ok(Vec3A::new(r.real(double)?, r.real(double)?, r.real(double)?)))
+            .collect()
+    };
+    let positions = vec3s(&mut r)?;
+    let normals = if flags & 1 != 0 {
+        Some(vec3s(&mut r)?)
+    } else {
+        None
+    };
+    if flags & 2 != 0 {
+        r.bytes(2 * scalar * vertices)?; // texture coordinates: no textures yet
+    }
+    if flags & 8 != 0 {
+        r.bytes(3 * scalar * vertices)?; // vertex colours: Mitsuba drops them too
+    }
+    let triangles = (0..faces)
+        .map(|_| Ok([r.u32()?, r.u32()?, r.u32()?]))
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok(Mesh {
+        positions,
+        normals,
+        triangles,
+    })
+}
+
+/// Reads little-endian values from a decompressed mesh.
+struct Cursor<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl Cursor<'_> {
+    fn bytes(&mut self, n: usize) -> Result<&[u8], String> {
+        let b = self
+            .data
+            .get(self.at..self.at.checked_add(n).ok_or("mesh data overflow")?)
+            .ok_or("the mesh data ends early")?;
+        self.at += n;
+        Ok(b)
+    }
+    fn u32(&mut self) -> Result<u32, String> {
+        Ok(u32::from_le_bytes(self.bytes(4)?.try_into().unwrap()))
+    }
+    fn u64(&mut self) -> Result<u64, String> {
+        Ok(u64::from_le_bytes(self.bytes(8)?.try_into().unwrap()))
+    }
+    fn real(&mut self, double: bool) -> Result<f32, String> {
+        Ok(if double {
+            f64::from_le_bytes(self.bytes(8)?.try_into().unwrap()) as f32
+        } else {
+            f32::from_le_bytes(self.bytes(4)?.try_into().unwrap())
+        })
+    }
 }
 
 #[cfg(test)]
