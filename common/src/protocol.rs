@@ -46,6 +46,20 @@ pub struct Lease {
     pub deadline_ms: u64,
     /// How often to heartbeat, in milliseconds.
     pub heartbeat_ms: u64,
+    /// The lease's secret: heartbeats, the result and the release must carry it (header
+    /// [`LEASE_KEY_HEADER`]), so that only the worker granted the lease can use it.
+    pub key: String,
+}
+
+/// The header that carries a lease's secret.
+pub const LEASE_KEY_HEADER: &str = "x-photonfarm-lease-key";
+
+/// The largest encoding of a batch result of a `width` × `height` image: results are checked
+/// against it before they are read, so no upload can be larger than its lease implies.
+pub fn max_encoded_batch(width: u32, height: u32) -> u64 {
+    // Magic, then bincode varints: at most 5 bytes per u32, 9 per u64 (the vector's length
+    // included) and 10 per zigzag i64, three per pixel.
+    MAGIC.len() as u64 + 2 * 5 + 3 * 9 + width as u64 * height as u64 * 30
 }
 
 /// The coordinator's answer to a heartbeat.
@@ -125,5 +139,13 @@ mod tests {
         let mut extra = bytes.clone();
         extra.push(0);
         assert!(decode_batch(&extra).is_err());
+        let mut worst = FilmSum::new(3, 2);
+        worst
+            .sums
+            .iter_mut()
+            .for_each(|s| *s = [i64::MIN, i64::MAX, i64::MIN]);
+        worst.passes = u64::MAX;
+        worst.nonfinite = u64::MAX;
+        assert!(encode_batch(&worst).len() as u64 <= max_encoded_batch(3, 2));
     }
 }

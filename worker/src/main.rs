@@ -44,6 +44,7 @@ fn main() -> ExitCode {
             .cache
             .unwrap_or_else(|| std::env::temp_dir().join(format!("photonfarm-worker-{name}"))),
         name,
+        limits: photonfarm::limits::Limits::for_this_machine(),
     };
     if config.threads == 0 {
         eprintln!("error: --threads must be at least 1");
