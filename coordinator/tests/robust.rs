@@ -1,0 +1,546 @@
+//! Issue 11: the farm never goes down. Each defect of the issue, reproduced against a real
+//! `coordinator serve` over loopback: it now gets a 4xx naming the limit, the coordinator
+//! keeps serving, and it restarts cleanly.
+
+mod support;
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use reqwest::StatusCode;
+use reqwest::multipart::{Form, Part};
+use serde_json::Value;
+
+const TOKEN: &str = "client-token";
+const WORKER_TOKEN: &str = "worker-token";
+
+fn tar_of(files: &[(&str, &[u8])]) -> Vec<u8> {
+    let mut b = tar::Builder::new(Vec::new());
+    for (name, data) in files {
+        let mut h = tar::Header::new_gnu();
+        h.set_size(data.len() as u64);
+        h.set_mode(0o644);
+        h.set_cksum();
+        b.append_data(&mut h, name, *data).unwrap();
+    }
+    b.into_inner().unwrap()
+}
+
+/// A small scene with `integrator` and `film` inserted.
+fn scene(integrator: &str, width: u64, height: u64) -> Vec<u8> {
+    format!(
+        r#"<scene version="3.0.0">
+        {integrator}
+        <sensor type="perspective"><float name="fov" value="60"/>
+            <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="{width}"/><integer name="height" value="{height}"/>
+                <rfilter type="box"/></film></sensor>
+        <shape type="sphere"><float name="radius" value="0.8"/><bsdf type="diffuse"/></shape>
+        <emitter type="point"><point name="position" x="0" y="2" z="2"/><rgb name="intensity" value="5"/></emitter>
+        </scene>"#
+    )
+    .into_bytes()
+}
+
+fn serve(data: &Path, bind: &str, extra: &[&str]) -> (support::Proc, String) {
+    support::serve(
+        data,
+        bind,
+        extra,
+        &[
+            ("PHOTONFARM_TOKEN", TOKEN),
+            ("PHOTONFARM_WORKER_TOKEN", WORKER_TOKEN),
+        ],
+    )
+}
+
+struct Api {
+    url: String,
+    http: reqwest::Client,
+}
+
+impl Api {
+    fn new(url: &str) -> Api {
+        Api {
+            url: url.to_string(),
+            http: reqwest::Client::new(),
+        }
+    }
+
+    async fn submit_form(&self, form: Form) -> (StatusCode, Value) {
+        let resp = self
+            .http
+            .post(format!("{}/api/jobs", self.url))
+            .bearer_auth(TOKEN)
+            .multipart(form)
+            .send()
+            .await
+            .unwrap();
+        let status = resp.status();
+        (status, resp.json().await.unwrap_or(Value::Null))
+    }
+
+    async fn submit(&self, bundle: Vec<u8>, settings: &str) -> (StatusCode, Value) {
+        let form = Form::new()
+            .part("bundle", Part::bytes(bundle).file_name("b.tar"))
+            .text("settings", settings.to_string());
+        self.submit_form(form).await
+    }
+
+    async fn call(
+        &self,
+        method: reqwest::Method,
+        path: &str,
+        token: &str,
+        key: &str,
+        body: Vec<u8>,
+    ) -> (StatusCode, Value) {
+        let resp = self
+            .http
+            .request(method, format!("{}{path}", self.url))
+            .header("Authorization", format!("Bearer {token}"))
+            .header("x-photonfarm-lease-key", key)
+            .body(body)
+            .send()
+            .await
+            .unwrap();
+        let status = resp.status();
+        (status, resp.json().await.unwrap_or(Value::Null))
+    }
+
+    async fn get(&self, path: &str) -> (StatusCode, Value) {
+        self.call(reqwest::Method::GET, path, TOKEN, "", vec![]).await
+    }
+
+    async fn lease(&self, worker: &str) -> Option<Value> {
+        let body = format!(r#"{{"worker": "{worker}", "threads": 1}}"#).into_bytes();
+        let (s, v) = self
+            .call(reqwest::Method::POST, "/api/lease", WORKER_TOKEN, "", body)
+            .await;
+        match s {
+            StatusCode::OK => Some(v),
+            StatusCode::NO_CONTENT => None,
+            s => panic!("lease: {s} {v}"),
+        }
+    }
+}
+
+fn error_of(v: &Value) -> &str {
+    v["error"]
+        .as_str()
+        .unwrap_or_else(|| panic!("not a JSON error: {v}"))
+}
+
+/// Asserts a refusal with `status` whose message contains `needle`.
+fn refused(got: (StatusCode, Value), status: StatusCode, needle: &str) {
+    assert_eq!(got.0, status, "{}", got.1);
+    assert!(error_of(&got.1).contains(needle), "{}", got.1);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn every_size_is_admitted_or_refused_with_a_4xx_and_the_coordinator_survives_restarts() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let flags = [
+        "--max-geometry-mb",
+        "1",
+        "--max-bundle-files",
+        "20",
+        "--max-upload-mb",
+        "8",
+    ];
+    let (mut coordinator, url) = serve(&data, "127.0.0.1:0", &flags);
+    let api = Api::new(&url);
+    let unprocessable = StatusCode::UNPROCESSABLE_ENTITY;
+
+    // Critical: a 65536×65536 film (an allowed size for the parser) used to abort the
+    // coordinator allocating 103 GB; the job was stored first, so every restart aborted too.
+    let big = tar_of(&[("s.xml", &scene("", 65536, 65536))]);
+    refused(api.submit(big, "{}").await, unprocessable, "--max-pixels");
+    // SPPM passes 1e12 (the radius schedule was 8 B per pass) and photons 1e12.
+    let small = tar_of(&[("s.xml", &scene("", 8, 8))]);
+    refused(
+        api.submit(
+            small.clone(),
+            r#"{"integrator": "sppm", "passes": 1000000000000}"#,
+        )
+        .await,
+        unprocessable,
+        "--max-passes",
+    );
+    refused(
+        api.submit(
+            small.clone(),
+            r#"{"integrator": "sppm", "photons": 1000000000000}"#,
+        )
+        .await,
+        unprocessable,
+        "--max-photons",
+    );
+    // A scene-declared iteration count of 1e9, 0 and -5.
+    for (value, needle) in [
+        ("1000000000", "--max-passes"),
+        ("0", "positive integer"),
+        ("-5", "positive integer"),
+    ] {
+        let integrator =
+            format!(r#"<integrator type="sppm"><integer name="iterations" value="{value}"/></integrator>"#);
+        let b = tar_of(&[("s.xml", &scene(&integrator, 8, 8))]);
+        refused(
+            api.submit(b, r#"{"integrator": "sppm"}"#).await,
+            unprocessable,
+            needle,
+        );
+    }
+    // XML nested 5000 deep (35 KB) overflowed the stack.
+    let deep = format!(
+        "<scene version=\"3.0.0\">{}{}</scene>",
+        "<shape>".repeat(5000),
+        "</shape>".repeat(5000)
+    );
+    refused(
+        api.submit(tar_of(&[("s.xml", deep.as_bytes())]), "{}").await,
+        unprocessable,
+        "nest deeper",
+    );
+    // A <default> expansion bomb: a 1 KB scene asking for gigabytes, even unused.
+    let mut bomb = String::from(r#"<scene version="3.0.0"><default name="d0" value="xxxxxxxxxxxxxxxx"/>"#);
+    for i in 1..40 {
+        bomb.push_str(&format!(
+            r#"<default name="d{i}" value="$d{}$d{}"/>"#,
+            i - 1,
+            i - 1
+        ));
+    }
+    bomb.push_str("</scene>");
+    refused(
+        api.submit(tar_of(&[("s.xml", bomb.as_bytes())]), "{}").await,
+        unprocessable,
+        "more than",
+    );
+    // Geometry beyond --max-geometry-mb, refused before the mesh is loaded.
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".repeat(60_000);
+    let with_mesh = String::from_utf8(scene("", 8, 8)).unwrap().replace(
+        "</scene>",
+        r#"<shape type="obj"><string name="filename" value="m.obj"/></shape></scene>"#,
+    );
+    refused(
+        api.submit(
+            tar_of(&[("s.xml", with_mesh.as_bytes()), ("m.obj", obj.as_bytes())]),
+            "{}",
+        )
+        .await,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "--max-geometry-mb",
+    );
+    // Bundles with too many files.
+    let names: Vec<String> = (0..30).map(|i| format!("f{i}.txt")).collect();
+    let mut files: Vec<(&str, &[u8])> = names.iter().map(|n| (n.as_str(), &b"x"[..])).collect();
+    let s8 = scene("", 8, 8);
+    files.push(("s.xml", &s8));
+    refused(
+        api.submit(tar_of(&files), "{}").await,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "files",
+    );
+    // The settings field escaped the 64 KiB JSON limit; defines are bounded too.
+    let huge_settings = format!(r#"{{"defines": [["a", "{}"]]}}"#, "x".repeat(100_000));
+    refused(
+        api.submit(small.clone(), &huge_settings).await,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "settings",
+    );
+    let many: Vec<String> = (0..300).map(|i| format!(r#"["d{i}", "1"]"#)).collect();
+    refused(
+        api.submit(small.clone(), &format!(r#"{{"defines": [{}]}}"#, many.join(",")))
+            .await,
+        unprocessable,
+        "defines",
+    );
+
+    // A good job; its lease's result is held to the lease's size before it is read (a 429 MB
+    // body for a 16×16 job used to be decoded, and kill the coordinator).
+    let (s, job) = api.submit(small.clone(), r#"{"passes": 3}"#).await;
+    assert_eq!(s, StatusCode::CREATED, "{job}");
+    let lease = api.lease("w").await.unwrap();
+    let (id, key) = (
+        lease["lease_id"].as_u64().unwrap(),
+        lease["key"].as_str().unwrap(),
+    );
+    let result = format!("/api/leases/{id}/result");
+    refused(
+        api.call(
+            reqwest::Method::PUT,
+            &result,
+            WORKER_TOKEN,
+            key,
+            vec![0; 64 << 10],
+        )
+        .await,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "at most",
+    );
+    // Workers are not users: the client token cannot lease, the worker token cannot cancel,
+    // and a lease can only be used with its secret.
+    refused(
+        api.call(
+            reqwest::Method::POST,
+            &format!("/api/leases/{id}/heartbeat"),
+            TOKEN,
+            key,
+            vec![],
+        )
+        .await,
+        StatusCode::UNAUTHORIZED,
+        "token",
+    );
+    let job_path = format!("/api/jobs/{}", job["id"]);
+    refused(
+        api.call(reqwest::Method::DELETE, &job_path, WORKER_TOKEN, "", vec![])
+            .await,
+        StatusCode::UNAUTHORIZED,
+        "token",
+    );
+    for path in ["heartbeat", "release"] {
+        refused(
+            api.call(
+                reqwest::Method::POST,
+                &format!("/api/leases/{id}/{path}"),
+                WORKER_TOKEN,
+                "guessed",
+                br#"{"error": "made up"}"#.to_vec(),
+            )
+            .await,
+            StatusCode::FORBIDDEN,
+            "another worker",
+        );
+    }
+    let (s, v) = api
+        .call(
+            reqwest::Method::POST,
+            &format!("/api/leases/{id}/heartbeat"),
+            WORKER_TOKEN,
+            key,
+            vec![],
+        )
+        .await;
+    assert_eq!(s, StatusCode::OK, "{v}");
+    // "bearer" in lower case is the same scheme.
+    let r = api
+        .http
+        .get(format!("{url}/api/jobs"))
+        .header("Authorization", format!("bearer {TOKEN}"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), StatusCode::OK);
+
+    // Still serving, and it restarts cleanly (nothing refused was stored).
+    let (s, v) = api.get("/api/jobs").await;
+    assert_eq!(s, StatusCode::OK);
+    assert_eq!(v["jobs"].as_array().unwrap().len(), 1, "{v}");
+    coordinator.sigkill();
+    let (_coordinator, url) = serve(&data, "127.0.0.1:0", &flags);
+    let (s, v) = Api::new(&url).get("/api/jobs").await;
+    assert_eq!(s, StatusCode::OK);
+    assert_eq!(v["jobs"].as_array().unwrap().len(), 1, "{v}");
+    assert_ne!(v["jobs"][0]["state"], "failed", "{v}");
+}
+
+/// Job rows and files as an older version, a crash or a disk fault may leave them.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_job_that_cannot_be_resumed_fails_alone_and_the_coordinator_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (mut coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    let small = tar_of(&[("s.xml", &scene("", 8, 8))]);
+    let mut ids = Vec::new();
+    for _ in 0..4 {
+        let (s, v) = api.submit(small.clone(), r#"{"passes": 4}"#).await;
+        assert_eq!(s, StatusCode::CREATED, "{v}");
+        ids.push(v["id"].as_u64().unwrap());
+    }
+    coordinator.sigkill();
+    // Job 1: a damaged prefix. Job 2: a 65536×65536 film and job 3: zero passes, as older
+    // versions stored them. Job 4: a damaged batch file, which is dropped and re-rendered.
+    std::fs::create_dir_all(data.join(format!("jobs/{}", ids[0]))).unwrap();
+    std::fs::write(data.join(format!("jobs/{}/prefix.bin", ids[0])), b"garbage").unwrap();
+    std::fs::create_dir_all(data.join(format!("jobs/{}", ids[3]))).unwrap();
+    std::fs::write(data.join(format!("jobs/{}/batch-0-2.bin", ids[3])), b"garbage").unwrap();
+    {
+        let db = rusqlite::Connection::open(data.join("photonfarm.sqlite")).unwrap();
+        db.execute(
+            "UPDATE jobs SET width = 65536, height = 65536 WHERE id = ?1",
+            [ids[1] as i64],
+        )
+        .unwrap();
+        db.execute("UPDATE jobs SET total = 0 WHERE id = ?1", [ids[2] as i64])
+            .unwrap();
+        db.execute(
+            "INSERT INTO batches (job, start, end) VALUES (?1, 0, 2)",
+            [ids[3] as i64],
+        )
+        .unwrap();
+        db.execute(
+            "UPDATE jobs SET next_start = 2, state = 'running' WHERE id = ?1",
+            [ids[3] as i64],
+        )
+        .unwrap();
+    }
+    let (_coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    for (id, needle) in [
+        (ids[0], "damaged"),
+        (ids[1], "--max-pixels"),
+        (ids[2], "no passes"),
+    ] {
+        let (s, v) = api.get(&format!("/api/jobs/{id}")).await;
+        assert_eq!(s, StatusCode::OK);
+        assert_eq!(v["state"], "failed", "{v}");
+        assert!(v["message"].as_str().unwrap().contains(needle), "{v}");
+    }
+    let (_, v) = api.get(&format!("/api/jobs/{}", ids[3])).await;
+    assert_eq!(v["state"], "running", "{v}");
+    assert_eq!(v["iterations_done"], 0, "the damaged batch is not counted: {v}");
+    // Its passes are handed out again, from the start.
+    let lease = api.lease("w").await.unwrap();
+    assert_eq!(
+        (lease["job_id"].as_u64(), lease["start"].as_u64()),
+        (Some(ids[3]), Some(0))
+    );
+}
+
+/// A lost database used to restart ids at 1, and a new job was reported done with the
+/// previous job 1's image.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_lost_database_never_reuses_ids_or_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (mut coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    let small = tar_of(&[("s.xml", &scene("", 8, 8))]);
+    let (_, v) = api.submit(small.clone(), r#"{"passes": 1}"#).await;
+    let first = v["id"].as_u64().unwrap();
+    // Render it by hand: one pass, one result.
+    let lease = api.lease("w").await.unwrap();
+    let mut sum = photonfarm::film::FilmSum::new(8, 8);
+    sum.passes = 1;
+    sum.sums[0] = [1 << 24, 0, 0];
+    let (s, v) = api
+        .call(
+            reqwest::Method::PUT,
+            &format!("/api/leases/{}/result", lease["lease_id"]),
+            WORKER_TOKEN,
+            lease["key"].as_str().unwrap(),
+            photonfarm::protocol::encode_batch(&sum),
+        )
+        .await;
+    assert_eq!(s, StatusCode::OK, "{v}");
+    let (_, v) = api.get(&format!("/api/jobs/{first}")).await;
+    assert_eq!(v["state"], "done", "{v}");
+    coordinator.sigkill();
+    for f in [
+        "photonfarm.sqlite",
+        "photonfarm.sqlite-wal",
+        "photonfarm.sqlite-shm",
+    ] {
+        let _ = std::fs::remove_file(data.join(f));
+    }
+    let (_coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    let (s, v) = api.submit(small, r#"{"passes": 1}"#).await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+    let second = v["id"].as_u64().unwrap();
+    assert!(second > first, "id {second} reused");
+    assert_eq!(v["state"], "queued");
+    let (s, _) = api.get(&format!("/api/jobs/{second}/image.exr")).await;
+    assert_eq!(s, StatusCode::NOT_FOUND, "a new job has no image");
+}
+
+/// One HTTP GET over a raw socket; returns how long the answer took.
+fn timed_get(addr: &str, path: &str) -> Duration {
+    use std::io::{Read, Write};
+    let start = Instant::now();
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {TOKEN}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut out = Vec::new();
+    s.read_to_end(&mut out).unwrap();
+    assert!(
+        out.starts_with(b"HTTP/1.1 200"),
+        "{}",
+        String::from_utf8_lossy(&out)
+    );
+    start.elapsed()
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn the_api_answers_within_50_ms_while_a_huge_job_is_submitted_and_results_are_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    let addr = url.strip_prefix("http://").unwrap().to_string();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (poll_stop, poll_addr) = (stop.clone(), addr.clone());
+    let poller = std::thread::spawn(move || {
+        let mut worst = Duration::ZERO;
+        let mut n = 0;
+        while !poll_stop.load(std::sync::atomic::Ordering::Relaxed) {
+            worst = worst.max(timed_get(&poll_addr, "/api/jobs"));
+            n += 1;
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        (worst, n)
+    });
+    // A 1024×1024 film checkpointed at every pass (the prefix fsynced and EXR and PNG
+    // encoded, which used to happen under the lock), then the longest job allowed (its radius
+    // schedule, 10 million entries, used to be computed under the lock).
+    let big = tar_of(&[("s.xml", &scene("", 1024, 1024))]);
+    let (s, v) = api.submit(big, r#"{"passes": 3, "checkpoint_every": 1}"#).await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+    let big_id = v["id"].as_u64().unwrap();
+    let sppm = tar_of(&[("s.xml", &scene("", 8, 8))]);
+    let (s, v) = api
+        .submit(
+            sppm,
+            r#"{"integrator": "sppm", "passes": 10000000, "photons": 100}"#,
+        )
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+    let mut sum = photonfarm::film::FilmSum::new(1024, 1024);
+    sum.passes = 1;
+    for (i, s) in sum.sums.iter_mut().enumerate() {
+        *s = [(i as i64 * 7919) % (1 << 26), (i as i64) << 10, 12345];
+    }
+    let encoded = photonfarm::protocol::encode_batch(&sum);
+    let mut results = 0;
+    while results < 3 {
+        let lease = api.lease("w").await.unwrap();
+        let key = lease["key"].as_str().unwrap();
+        let path = format!("/api/leases/{}/", lease["lease_id"]);
+        assert_eq!(lease["job_id"].as_u64(), Some(big_id), "the oldest job first");
+        let (s, v) = api
+            .call(
+                reqwest::Method::PUT,
+                &(path + "result"),
+                WORKER_TOKEN,
+                key,
+                encoded.clone(),
+            )
+            .await;
+        assert_eq!(s, StatusCode::OK, "{v}");
+        results += 1;
+    }
+    let (_, v) = api.get(&format!("/api/jobs/{big_id}")).await;
+    assert_eq!(v["state"], "done", "{v}");
+    assert_eq!(v["checkpoint_iterations"], 3, "{v}");
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let (worst, n) = poller.join().unwrap();
+    eprintln!("{n} status requests, the slowest in {worst:?}");
+    assert!(n >= 10, "too few samples: {n}");
+    assert!(worst < Duration::from_millis(50), "the API stalled for {worst:?}");
+}
