@@ -12,7 +12,9 @@ use crate::service::{ServeConfig, run as serve};
 /// The limits: this machine's defaults, overridden by the flags.
 fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
     let mut a = Admission::for_this_machine();
-    let mib = |v: u64| v.saturating_mul(1 << 20);
+    fn mib(v: u64) -> u64 {
+        v.saturating_mul(1 << 20)
+    }
     a.max_upload = mib(args.max_upload_mb);
     a.job.max_pixels = args.max_pixels.unwrap_or(a.job.max_pixels);
     a.job.max_passes = args.max_passes.unwrap_or(a.job.max_passes);
