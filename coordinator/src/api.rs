@@ -347,13 +347,21 @@ fn accept_bundle(
         )));
     }
     let loaded = Scene::load(&files_dir.join(&scene_rel), &settings.defines).map_err(|mut e| {
-        // Name files as the user knows them: relative to the bundle.
+        // Name files as the user knows them: relative to the bundle, never by the
+        // coordinator's own paths (the message may quote a resolved path too).
         e.file = e
             .file
             .strip_prefix(&files_dir)
             .map(PathBuf::from)
             .unwrap_or(e.file);
-        bad(e.to_string())
+        let ours = files_dir.display().to_string();
+        let real = files_dir
+            .canonicalize()
+            .map_or_else(|_| ours.clone(), |p| p.display().to_string());
+        bad(e
+            .to_string()
+            .replace(&format!("{real}/"), "")
+            .replace(&format!("{ours}/"), ""))
     })?;
     let resolved = settings.resolve(&loaded, false).map_err(|e| bad(e.to_string()))?;
     let total = resolved.passes.expect("closed-ended resolution has a count");

@@ -134,6 +134,8 @@ struct JobSched {
     message: Option<String>,
     /// (range start, worker) → failures.
     failures: HashMap<(u64, String), u32>,
+    /// The latest failure's message, for the job's message if it fails.
+    last_error: Option<String>,
     /// Passes per millisecond, per worker, from its finished batches.
     rates: HashMap<String, f64>,
 }
@@ -209,6 +211,7 @@ impl Scheduler {
                 state,
                 message: None,
                 failures: HashMap::new(),
+                last_error: None,
                 rates: HashMap::new(),
             },
         );
@@ -315,6 +318,7 @@ impl Scheduler {
         let job = self.jobs.get_mut(&lease.job).expect("a lease's job exists");
         job.free.insert((lease.start, lease.end));
         if let Some(error) = error {
+            job.last_error = Some(error.to_string());
             *job.failures
                 .entry((lease.start, lease.worker.clone()))
                 .or_default() += 1;
@@ -464,8 +468,9 @@ fn fail_if_barred_everywhere<'a>(job: &mut JobSched, workers: impl Iterator<Item
         names.sort();
         job.state = JobState::Failed;
         job.message = Some(format!(
-            "passes {s}..{e} failed on every available worker ({}); no worker may take them",
-            names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", ")
+            "passes {s}..{e} failed on every available worker ({}); no worker may take them; last error: {}",
+            names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "),
+            job.last_error.as_deref().unwrap_or("none")
         ));
     }
 }

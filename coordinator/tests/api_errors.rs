@@ -193,6 +193,10 @@ async fn bad_requests_get_the_right_4xx_and_the_service_keeps_serving() {
         .await;
     assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY);
     assert!(error_of(&v).contains("not found"), "{v}");
+    assert!(
+        !error_of(&v).contains(dir.path().to_str().unwrap()),
+        "the coordinator's paths leak: {v}"
+    );
 
     // Path traversal in the bundle.
     let (s, v) = api
