@@ -21,8 +21,8 @@ pub struct Admission {
     pub max_upload: u64,
     /// Files and unpacked bytes of one bundle.
     pub bundle: UnpackLimits,
-    /// Bytes of a bundle's files other than its scene (meshes). Loading a mesh takes up to
-    /// ~30 times its file's size, so this bounds what checking a scene can take.
+    /// Bytes of a bundle's files (the scene and its meshes). Loading a mesh takes up to ~30
+    /// times its file's size, so this bounds what checking a scene can take.
     pub max_geometry: u64,
     /// Uploads (bundles and batch results) read at the same time: each is held in memory
     /// or on disk while it is checked, so this bounds their sum.

@@ -332,17 +332,16 @@ fn accept_bundle(
     if !files.contains(&scene_rel) {
         return Err(bad(format!("the bundle has no file \"{}\"", scene_rel.display())));
     }
-    // Geometry is bounded before the scene is loaded: loading a mesh takes many times its
-    // file's size.
+    // What loading reads is bounded before the scene is loaded: parsing the XML or a mesh
+    // takes many times the file's size.
     let geometry: u64 = files
         .iter()
-        .filter(|f| **f != scene_rel)
         .filter_map(|f| std::fs::metadata(files_dir.join(f)).ok())
         .map(|m| m.len())
         .sum();
     if geometry > limits.max_geometry {
         return Err(too_large(format!(
-            "the bundle's files besides the scene (meshes) take {geometry} bytes, above the limit of {} (--max-geometry-mb)",
+            "the bundle's files (the scene and its meshes) take {geometry} bytes, above the limit of {} (--max-geometry-mb)",
             limits.max_geometry
         )));
     }

@@ -247,7 +247,7 @@ pub struct ServeArgs {
     /// Most SPPM photons per iteration [default: memory / 256 B].
     #[arg(long)]
     pub max_photons: Option<u64>,
-    /// Most bytes of a bundle's files besides the scene (meshes), in MiB
+    /// Most bytes of a bundle's files (the scene and its meshes), in MiB
     /// [default: memory / 128].
     #[arg(long)]
     pub max_geometry_mb: Option<u64>,

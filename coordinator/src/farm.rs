@@ -686,3 +686,82 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
         state,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::film::FilmSum;
+    use photonfarm::integrator::path::PathSettings;
+
+    fn render() -> RenderSettings {
+        RenderSettings {
+            seed: 0,
+            method: Method::Path(PathSettings {
+                max_depth: None,
+                rr_depth: 5,
+            }),
+        }
+    }
+
+    #[test]
+    fn jobs_that_are_over_hold_no_sums_in_memory_even_after_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let config = FarmConfig {
+            limits: Limits::for_memory(1 << 30),
+            ..FarmConfig::default()
+        };
+        let mut farm = Farm::open(Store::open(dir.path()).unwrap(), config).unwrap();
+        let settings = JobSettings {
+            passes: Some(1),
+            ..JobSettings::default()
+        };
+        let empty = || Accumulator::new(FilmSum::new(4, 4), 1);
+        let done = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", empty())
+            .unwrap();
+        let cancelled = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", empty())
+            .unwrap();
+        let running = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", empty())
+            .unwrap();
+        assert_eq!(farm.sums_in_memory(), 3);
+
+        // Render the first job: one result, its final image, and its sum leaves memory.
+        let req = LeaseRequest {
+            worker: "w".into(),
+            threads: 1,
+        };
+        let lease = farm.lease(&req).unwrap().unwrap();
+        assert_eq!(lease.job_id, done);
+        assert!(matches!(
+            farm.commit(lease.lease_id, "not the key", 1),
+            Err(FarmError::NotYours(_))
+        ));
+        let c = farm.commit(lease.lease_id, &lease.key, 1).unwrap();
+        let mut part = FilmSum::new(4, 4);
+        part.passes = 1;
+        let mut acc = c.sum.lock().unwrap();
+        acc.add(0, part).unwrap();
+        let layout = farm.layout();
+        layout.write_prefix(done, acc.prefix()).unwrap();
+        layout.write_images(done, acc.prefix()).unwrap();
+        drop(acc);
+        assert_eq!(
+            farm.status(done).unwrap().state,
+            JobState::Running,
+            "no image yet"
+        );
+        farm.checkpointed(done, 1, Some(1)).unwrap();
+        assert_eq!(farm.status(done).unwrap().state, JobState::Done);
+        farm.cancel(cancelled).unwrap();
+        assert_eq!(farm.sums_in_memory(), 1);
+
+        drop(farm);
+        let farm = Farm::open(Store::open(dir.path()).unwrap(), config).unwrap();
+        assert_eq!(farm.sums_in_memory(), 1, "only the running job's");
+        assert_eq!(farm.status(done).unwrap().state, JobState::Done);
+        assert_eq!(farm.status(done).unwrap().checkpoint_iterations, 1);
+        assert_eq!(farm.status(running).unwrap().state, JobState::Queued);
+    }
+}
