@@ -127,6 +127,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         )
         .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint (see docs/api.md)") })
         .layer(DefaultBodyLimit::max(JSON_LIMIT))
+        .layer(middleware::from_fn(busy))
         .layer(middleware::from_fn_with_state(state.clone(), auth))
         .with_state(state)
 }
@@ -162,6 +163,18 @@ async fn auth(State(state): State<Arc<AppState>>, headers: HeaderMap, req: Reque
         }
     }
     next.run(req).await
+}
+
+/// Marks the connection busy while an authenticated request is handled, so the idle timeout
+/// does not close it under a long handler (see [`crate::connections`]).
+async fn busy(req: Request, next: Next) -> Response {
+    let guard = req
+        .extensions()
+        .get::<axum::extract::ConnectInfo<crate::connections::Busy>>()
+        .map(|b| b.0.enter());
+    let response = next.run(req).await;
+    drop(guard);
+    response
 }
 
 fn parse_id(s: &str) -> ApiResult<u64> {

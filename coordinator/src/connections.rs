@@ -5,10 +5,12 @@
 //! exhaust the descriptors and the service stops accepting anyone, workers included. Past the
 //! cap, new connections wait in the kernel's listen backlog, which costs the process nothing.
 //! A connection on which nothing is read or written for the idle timeout is closed, so slow
-//! clients free their slots.
+//! clients free their slots, except while an authenticated request on it is being handled
+//! ([`Busy`]): a long scene check must not cost its client the answer.
 
 use std::pin::Pin;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
@@ -56,6 +58,7 @@ impl axum::serve::Listener for BoundedListener {
                             _permit: permit,
                             idle: self.idle,
                             deadline: Box::pin(tokio::time::sleep(self.idle)),
+                            busy: Busy::default(),
                         },
                         addr,
                     );
@@ -81,6 +84,35 @@ pub struct Connection {
     _permit: OwnedSemaphorePermit,
     idle: Duration,
     deadline: Pin<Box<Sleep>>,
+    busy: Busy,
+}
+
+/// Requests of one connection being handled (after authentication): while there are any,
+/// the connection is not idle, whatever its traffic. Handed to the router as connect info.
+#[derive(Clone, Debug, Default)]
+pub struct Busy(Arc<AtomicUsize>);
+
+impl Busy {
+    /// Marks a request as being handled until the returned guard is dropped.
+    pub fn enter(&self) -> BusyGuard {
+        self.0.fetch_add(1, Ordering::Relaxed);
+        BusyGuard(self.0.clone())
+    }
+}
+
+/// See [`Busy::enter`].
+pub struct BusyGuard(Arc<AtomicUsize>);
+
+impl Drop for BusyGuard {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+impl axum::extract::connect_info::Connected<axum::serve::IncomingStream<'_, BoundedListener>> for Busy {
+    fn connect_info(stream: axum::serve::IncomingStream<'_, BoundedListener>) -> Busy {
+        stream.io().busy.clone()
+    }
 }
 
 impl Connection {
@@ -89,6 +121,11 @@ impl Connection {
     }
 
     fn check_deadline(&mut self, cx: &mut Context<'_>) -> Poll<std::io::Error> {
+        if self.busy.0.load(Ordering::Relaxed) > 0 {
+            // A request is being handled: silence is the handler working, not a slow client.
+            self.touch();
+            return Poll::Pending;
+        }
         match self.deadline.as_mut().poll(cx) {
             Poll::Ready(()) => Poll::Ready(std::io::Error::new(
                 std::io::ErrorKind::TimedOut,

@@ -85,9 +85,12 @@ pub async fn run(
         admission.max_connections,
         Duration::from_secs(admission.idle_timeout_s.max(1)),
     );
-    axum::serve(listener, router(state))
-        .with_graceful_shutdown(shutdown)
-        .await?;
+    axum::serve(
+        listener,
+        router(state).into_make_service_with_connect_info::<crate::connections::Busy>(),
+    )
+    .with_graceful_shutdown(shutdown)
+    .await?;
     expiry.abort();
     Ok(())
 }

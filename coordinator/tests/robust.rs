@@ -250,7 +250,7 @@ async fn every_size_is_admitted_or_refused_with_a_4xx_and_the_coordinator_surviv
         StatusCode::PAYLOAD_TOO_LARGE,
         "settings",
     );
-    let many: Vec<String> = (0..300).map(|i| format!(r#"["d{i}", "1"]"#)).collect();
+    let many: Vec<String> = (0..120).map(|i| format!(r#"["d{i}", "1"]"#)).collect();
     refused(
         api.submit(small.clone(), &format!(r#"{{"defines": [{}]}}"#, many.join(",")))
             .await,
@@ -563,5 +563,35 @@ fn a_job_no_worker_can_take_fails_with_a_message() {
     assert!(
         msg.contains("every available worker (small)") && msg.contains("--max-photons"),
         "{msg}"
+    );
+}
+
+/// The idle timeout closes silent connections, but not one whose request is being handled:
+/// a scene check longer than the timeout still gets its answer.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_long_scene_check_outlives_the_idle_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &["--idle-timeout", "1"]);
+    let api = Api::new(&url);
+    // Each rough plastic tabulates its coating's albedo when loaded (a few milliseconds).
+    let bsdfs: String = (0..120)
+        .map(|i| {
+            format!(
+                r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
+                100 + i
+            )
+        })
+        .collect();
+    let text = String::from_utf8(scene("", 8, 8))
+        .unwrap()
+        .replacen("<sensor", &format!("{bsdfs}<sensor"), 1);
+    let start = Instant::now();
+    let (s, v) = api.submit(tar_of(&[("s.xml", text.as_bytes())]), "{}").await;
+    let took = start.elapsed();
+    eprintln!("the scene check took {took:?}");
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+    assert!(
+        took > Duration::from_millis(1200),
+        "not longer than the timeout: {took:?}"
     );
 }
