@@ -397,9 +397,12 @@ impl Farm {
         let job = self.jobs.get_mut(&g.job_id).expect("known");
         job.batches_received += 1;
         job.bytes_received += bytes;
+        // A job that takes results holds its sum; should that ever not hold, the result is
+        // stored and recorded, and a restart merges it.
+        let sum = job.sum.clone().ok_or(LeaseError::JobOver(g.job_id))?;
         let committed = Committed {
             job: g.job_id,
-            sum: job.sum.clone().expect("a job that takes results holds its sum"),
+            sum,
             total: job.total,
         };
         self.persist_progress(g.job_id)?;
