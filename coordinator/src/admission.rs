@@ -32,8 +32,10 @@ pub struct Admission {
     /// Open connections; more wait in the listen backlog.
     pub max_connections: usize,
     /// Seconds a connection may stay silent (while a request is read, or idle between
-    /// requests) before it is closed.
+    /// requests) before it is closed; not while an authenticated request is handled.
     pub idle_timeout_s: u64,
+    /// Seconds a request head may take from its first byte to its end, however it trickles.
+    pub header_timeout_s: u64,
 }
 
 impl Admission {
@@ -50,7 +52,8 @@ impl Admission {
             max_uploads: 4,
             max_scene_checks: 1,
             max_connections: 256,
-            idle_timeout_s: 30,
+            idle_timeout_s: 60,
+            header_timeout_s: 10,
         }
     }
 

@@ -266,6 +266,9 @@ pub struct ServeArgs {
     /// Seconds of silence after which a connection is closed.
     #[arg(long, default_value_t = 60)]
     pub idle_timeout: u64,
+    /// Seconds a request head may take to arrive, from its first byte.
+    #[arg(long, default_value_t = 10)]
+    pub header_timeout: u64,
     /// Seconds without a heartbeat after which a batch goes to another worker.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,

@@ -5,8 +5,11 @@
 //! exhaust the descriptors and the service stops accepting anyone, workers included. Past the
 //! cap, new connections wait in the kernel's listen backlog, which costs the process nothing.
 //! A connection on which nothing is read or written for the idle timeout is closed, so slow
-//! clients free their slots, except while an authenticated request on it is being handled
-//! ([`Busy`]): a long scene check must not cost its client the answer.
+//! clients free their slots, and so is one whose request head (from its first byte to the
+//! blank line) takes longer than the head timeout, however it trickles in: a client that
+//! sends a byte a second is not idle, but it is slow. Neither applies while an authenticated
+//! request on the connection is being handled ([`Busy`]): a long scene check must not cost
+//! its client the answer.
 
 use std::pin::Pin;
 use std::sync::Arc;
@@ -24,15 +27,18 @@ pub struct BoundedListener {
     inner: TcpListener,
     slots: Arc<Semaphore>,
     idle: Duration,
+    head: Duration,
 }
 
 impl BoundedListener {
-    /// Wraps `inner`: at most `max` open connections, each closed after `idle` of silence.
-    pub fn new(inner: TcpListener, max: usize, idle: Duration) -> BoundedListener {
+    /// Wraps `inner`: at most `max` open connections, each closed after `idle` of silence or
+    /// when a request head takes longer than `head`.
+    pub fn new(inner: TcpListener, max: usize, idle: Duration, head: Duration) -> BoundedListener {
         BoundedListener {
             inner,
             slots: Arc::new(Semaphore::new(max.max(1))),
             idle,
+            head,
         }
     }
 }
@@ -57,6 +63,10 @@ impl axum::serve::Listener for BoundedListener {
                             stream,
                             _permit: permit,
                             idle: self.idle,
+                            idle_at: Instant::now() + self.idle,
+                            head: self.head,
+                            head_by: None,
+                            head_end: 0,
                             deadline: Box::pin(tokio::time::sleep(self.idle)),
                             busy: Busy::default(),
                         },
@@ -83,6 +93,14 @@ pub struct Connection {
     stream: TcpStream,
     _permit: OwnedSemaphorePermit,
     idle: Duration,
+    /// When the connection counts as idle, unless something is read or written first.
+    idle_at: Instant,
+    head: Duration,
+    /// While a request head is arriving: when it must be complete.
+    head_by: Option<Instant>,
+    /// How much of the blank line ending a head ("\r\n\r\n") the last bytes matched.
+    head_end: usize,
+    /// Fires at the earlier of `idle_at` and `head_by`.
     deadline: Pin<Box<Sleep>>,
     busy: Busy,
 }
@@ -116,12 +134,50 @@ impl axum::extract::connect_info::Connected<axum::serve::IncomingStream<'_, Boun
 }
 
 impl Connection {
+    fn rearm(&mut self) {
+        let at = self.head_by.map_or(self.idle_at, |h| h.min(self.idle_at));
+        self.deadline.as_mut().reset(at);
+    }
+
     fn touch(&mut self) {
-        self.deadline.as_mut().reset(Instant::now() + self.idle);
+        self.idle_at = Instant::now() + self.idle;
+        self.rearm();
+    }
+
+    fn is_busy(&self) -> bool {
+        self.busy.0.load(Ordering::Relaxed) > 0
+    }
+
+    /// Follows request heads in the bytes read: a head's clock starts at its first byte and
+    /// stops at the blank line after it. Bytes read while a request is handled are its body.
+    fn saw(&mut self, bytes: &[u8]) {
+        if self.is_busy() {
+            return;
+        }
+        for &b in bytes {
+            if self.head_by.is_none() {
+                self.head_by = Some(Instant::now() + self.head);
+                self.head_end = 0;
+            }
+            const END: &[u8; 4] = b"\r\n\r\n";
+            self.head_end = if b == END[self.head_end] {
+                self.head_end + 1
+            } else if b == b'\r' {
+                1
+            } else {
+                0
+            };
+            if self.head_end == END.len() {
+                // The rest of these bytes are the request's body: the head is complete.
+                self.head_by = None;
+                self.head_end = 0;
+                break;
+            }
+        }
     }
 
     fn check_deadline(&mut self, cx: &mut Context<'_>) -> Poll<std::io::Error> {
-        if self.busy.0.load(Ordering::Relaxed) > 0 {
+        if self.is_busy() {
             // A request is being handled: silence is the handler working, not a slow client.
             self.touch();
             return Poll::Pending;
@@ -129,7 +185,7 @@ impl Connection {
         match self.deadline.as_mut().poll(cx) {
             Poll::Ready(()) => Poll::Ready(std::io::Error::new(
                 std::io::ErrorKind::TimedOut,
-                "connection idle for too long",
+                "connection idle, or its request head slow, for too long",
             )),
             Poll::Pending => Poll::Pending,
         }
@@ -146,6 +202,7 @@ impl AsyncRead for Connection {
         match Pin::new(&mut self.stream).poll_read(cx, buf) {
             Poll::Ready(r) => {
                 if buf.filled().len() > before {
+                    self.saw(&buf.filled()[before..]);
                     self.touch();
                 }
                 Poll::Ready(r)
@@ -166,6 +223,9 @@ impl AsyncWrite for Connection {
     ) -> Poll<std::io::Result<usize>> {
         match Pin::new(&mut self.stream).poll_write(cx, data) {
             Poll::Ready(r) => {
+                // A response: whatever was read before it was a whole request.
+                self.head_by = None;
+                self.head_end = 0;
                 self.touch();
                 Poll::Ready(r)
             }

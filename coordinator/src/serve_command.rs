@@ -25,6 +25,7 @@ fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
     a.max_uploads = args.max_uploads;
     a.max_connections = args.max_connections;
     a.idle_timeout_s = args.idle_timeout;
+    a.header_timeout_s = args.header_timeout;
     let zero = [
         ("--max-pixels", a.job.max_pixels),
         ("--max-passes", a.job.max_passes),
@@ -34,6 +35,7 @@ fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
         ("--max-uploads", a.max_uploads as u64),
         ("--max-connections", a.max_connections as u64),
         ("--idle-timeout", a.idle_timeout_s),
+        ("--header-timeout", a.header_timeout_s),
     ];
     if let Some((flag, _)) = zero.iter().find(|(_, v)| *v == 0) {
         bail!("{flag} must be at least 1");

@@ -84,6 +84,7 @@ pub async fn run(
         listener,
         admission.max_connections,
         Duration::from_secs(admission.idle_timeout_s.max(1)),
+        Duration::from_secs(admission.header_timeout_s.max(1)),
     );
     axum::serve(
         listener,

@@ -250,7 +250,7 @@ async fn every_size_is_admitted_or_refused_with_a_4xx_and_the_coordinator_surviv
         StatusCode::PAYLOAD_TOO_LARGE,
         "settings",
     );
-    let many: Vec<String> = (0..120).map(|i| format!(r#"["d{i}", "1"]"#)).collect();
+    let many: Vec<String> = (0..300).map(|i| format!(r#"["d{i}", "1"]"#)).collect();
     refused(
         api.submit(small.clone(), &format!(r#"{{"defines": [{}]}}"#, many.join(",")))
             .await,
@@ -274,7 +274,8 @@ async fn every_size_is_admitted_or_refused_with_a_4xx_and_the_coordinator_surviv
             &result,
             WORKER_TOKEN,
             key,
-            vec![0; 64 << 10],
+            // Small enough to be sent whole before the early answer (the limit is 1965 B).
+            vec![0; 4 << 10],
         )
         .await,
         StatusCode::PAYLOAD_TOO_LARGE,
@@ -594,4 +595,49 @@ async fn a_long_scene_check_outlives_the_idle_timeout() {
         took > Duration::from_millis(1200),
         "not longer than the timeout: {took:?}"
     );
+}
+
+/// A request head trickling in a byte at a time is never idle, but it is slow: it is cut off
+/// at --header-timeout, while a keep-alive client that pauses between requests is not.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_trickling_request_head_is_cut_off() {
+    use std::io::{Read, Write};
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--header-timeout", "1"],
+    );
+    let addr = url.strip_prefix("http://").unwrap().to_string();
+    let cut_after = tokio::task::spawn_blocking(move || {
+        let mut s = std::net::TcpStream::connect(&addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_millis(1))).unwrap();
+        s.write_all(b"GET /api/jobs HTTP/1.1\r\nX-Slow: ").unwrap();
+        let start = Instant::now();
+        let mut buf = [0u8; 64];
+        while start.elapsed() < Duration::from_secs(10) {
+            if s.write_all(b"a").is_err() {
+                return start.elapsed();
+            }
+            match s.read(&mut buf) {
+                Ok(0) => return start.elapsed(),
+                Err(e) if e.kind() != std::io::ErrorKind::WouldBlock => return start.elapsed(),
+                _ => {}
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        start.elapsed()
+    })
+    .await
+    .unwrap();
+    assert!(
+        cut_after < Duration::from_secs(3),
+        "still open after {cut_after:?}"
+    );
+    // A client pausing between requests on one connection is served throughout.
+    let api = Api::new(&url);
+    for _ in 0..2 {
+        assert_eq!(api.get("/api/jobs").await.0, StatusCode::OK);
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+    }
 }
