@@ -22,6 +22,28 @@ pub enum BundleError {
     /// A file could not be read or written.
     #[error("{0}: {1}")]
     Io(String, std::io::Error),
+    /// The archive holds more files or bytes than the limits allow.
+    #[error("the bundle {0}")]
+    TooLarge(String),
+}
+
+/// Bounds on what unpacking a bundle may write: a small archive must not fill a disk or
+/// create millions of files.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UnpackLimits {
+    /// Most files (and folders).
+    pub max_files: usize,
+    /// Most bytes, over all files.
+    pub max_bytes: u64,
+}
+
+impl Default for UnpackLimits {
+    fn default() -> Self {
+        UnpackLimits {
+            max_files: 10_000,
+            max_bytes: 4 << 30,
+        }
+    }
 }
 
 /// Hex SHA-256 of the archive: the bundle's name.
@@ -86,15 +108,39 @@ pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<(Vec<u8>, PathBuf), Bundl
 
 /// Unpacks `bytes` into `dest` (created if missing), refusing anything but plain files and
 /// folders at plain relative paths. Returns the files written.
-pub fn unpack(bytes: &[u8], dest: &Path) -> Result<Vec<PathBuf>, BundleError> {
+pub fn unpack(bytes: &[u8], dest: &Path, limits: &UnpackLimits) -> Result<Vec<PathBuf>, BundleError> {
+    unpack_from(bytes, dest, limits)
+}
+
+/// [`unpack`] from a reader (a file on disk), so an archive never needs to be in memory.
+pub fn unpack_from(
+    reader: impl Read,
+    dest: &Path,
+    limits: &UnpackLimits,
+) -> Result<Vec<PathBuf>, BundleError> {
     std::fs::create_dir_all(dest).map_err(|e| BundleError::Io(dest.display().to_string(), e))?;
-    let mut archive = tar::Archive::new(bytes);
+    let mut archive = tar::Archive::new(reader);
     let mut written = Vec::new();
+    let (mut count, mut total) = (0usize, 0u64);
     let entries = archive
         .entries()
         .map_err(|e| BundleError::Archive(e.to_string()))?;
     for entry in entries {
         let mut entry = entry.map_err(|e| BundleError::Archive(e.to_string()))?;
+        count += 1;
+        if count > limits.max_files {
+            return Err(BundleError::TooLarge(format!(
+                "holds more than {} files (the limit)",
+                limits.max_files
+            )));
+        }
+        total = total.saturating_add(entry.size());
+        if total > limits.max_bytes {
+            return Err(BundleError::TooLarge(format!(
+                "unpacks to more than {} bytes (the limit)",
+                limits.max_bytes
+            )));
+        }
         let path = entry
             .path()
             .map_err(|e| BundleError::Archive(e.to_string()))?
@@ -112,11 +158,15 @@ pub fn unpack(bytes: &[u8], dest: &Path) -> Result<Vec<PathBuf>, BundleError> {
                 if let Some(parent) = target.parent() {
                     std::fs::create_dir_all(parent).map_err(|e| BundleError::Io(shown.clone(), e))?;
                 }
-                let mut data = Vec::new();
-                entry
-                    .read_to_end(&mut data)
-                    .map_err(|e| BundleError::Io(shown.clone(), e))?;
-                std::fs::write(&target, data).map_err(|e| BundleError::Io(shown, e))?;
+                // Streamed to disk: never more in memory than a copy buffer.
+                let mut file =
+                    std::fs::File::create(&target).map_err(|e| BundleError::Io(shown.clone(), e))?;
+                let size = entry.size();
+                let copied = std::io::copy(&mut (&mut entry).take(size), &mut file)
+                    .map_err(|e| BundleError::Archive(format!("{shown}: {e}")))?;
+                if copied != size {
+                    return Err(BundleError::Archive(format!("{shown}: truncated")));
+                }
                 written.push(path);
             }
             _ => {
@@ -149,7 +199,7 @@ mod tests {
         assert_eq!(content_hash(&a), content_hash(&b));
         assert_eq!(rel, PathBuf::from("scenes/a/scene.xml"));
         let dst = tempfile::tempdir().unwrap();
-        let written = unpack(&a, dst.path()).unwrap();
+        let written = unpack(&a, dst.path(), &UnpackLimits::default()).unwrap();
         assert_eq!(written.len(), 2);
         assert_eq!(
             std::fs::read_to_string(dst.path().join("scenes/a/../../meshes/a.obj")).unwrap(),
@@ -173,7 +223,9 @@ mod tests {
         bytes.resize(bytes.len() + 511, 0);
         bytes.extend_from_slice(&[0; 1024]);
         let dst = tempfile::tempdir().unwrap();
-        let e = unpack(&bytes, &dst.path().join("b")).unwrap_err().to_string();
+        let e = unpack(&bytes, &dst.path().join("b"), &UnpackLimits::default())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("../evil"), "{e}");
         assert!(!dst.path().join("evil").exists());
 
@@ -182,10 +234,51 @@ mod tests {
         h.set_entry_type(tar::EntryType::Symlink);
         h.set_size(0);
         b.append_link(&mut h, "link", "/etc/passwd").unwrap();
-        let e = unpack(&b.into_inner().unwrap(), dst.path())
+        let e = unpack(&b.into_inner().unwrap(), dst.path(), &UnpackLimits::default())
             .unwrap_err()
             .to_string();
         assert!(e.contains("only regular files"), "{e}");
-        assert!(unpack(b"garbage that is not a tar archive at all", dst.path()).is_err());
+        assert!(
+            unpack(
+                b"garbage that is not a tar archive at all",
+                dst.path(),
+                &UnpackLimits::default()
+            )
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn refuses_more_files_or_bytes_than_the_limits() {
+        let mut b = tar::Builder::new(Vec::new());
+        for i in 0..5 {
+            let mut h = tar::Header::new_gnu();
+            h.set_size(1000);
+            h.set_mode(0o644);
+            h.set_cksum();
+            b.append_data(&mut h, format!("f{i}"), &[0u8; 1000][..]).unwrap();
+        }
+        let tar = b.into_inner().unwrap();
+        let dst = tempfile::tempdir().unwrap();
+        let few = UnpackLimits {
+            max_files: 4,
+            max_bytes: 1 << 20,
+        };
+        assert!(matches!(
+            unpack(&tar, dst.path(), &few),
+            Err(BundleError::TooLarge(_))
+        ));
+        let small = UnpackLimits {
+            max_files: 100,
+            max_bytes: 4500,
+        };
+        assert!(matches!(
+            unpack(&tar, dst.path(), &small),
+            Err(BundleError::TooLarge(_))
+        ));
+        assert_eq!(
+            unpack(&tar, dst.path(), &UnpackLimits::default()).unwrap().len(),
+            5
+        );
     }
 }

@@ -86,7 +86,18 @@ pub enum JobError {
     /// Zero passes or a zero checkpoint interval.
     #[error("{0} must be at least 1")]
     Zero(&'static str),
+    /// The scene's `<integrator>` declares an iteration count that is not a positive integer.
+    #[error("the scene's SPPM iterations must be a positive integer, not {0}")]
+    DeclaredIterations(f64),
+    /// Too many or too long `-D` parameters.
+    #[error("defines: {0}")]
+    Defines(String),
 }
+
+/// Most `-D name=value` parameters a job may carry: each is substituted into the scene.
+pub const MAX_DEFINES: usize = 256;
+/// Longest `-D` name or value, in bytes.
+pub const MAX_DEFINE_LEN: usize = 4096;
 
 /// Settings resolved against a scene.
 #[derive(Clone, Debug)]
@@ -99,7 +110,39 @@ pub struct Resolved {
     pub warnings: Vec<String>,
 }
 
+/// A scene's `iterations`: a float in the XML, so a negative, fractional or huge value must
+/// be refused here rather than cast (−5 would become 0 passes, 1e30 would saturate).
+fn declared_iterations(v: f64) -> Result<u64, JobError> {
+    if v >= 1.0 && v.fract() == 0.0 && v <= u64::MAX as f64 / 2.0 {
+        Ok(v as u64)
+    } else {
+        Err(JobError::DeclaredIterations(v))
+    }
+}
+
 impl JobSettings {
+    /// Checks the number and length of the `-D` parameters (they are stored with the job and
+    /// sent with every batch).
+    pub fn check_defines(&self) -> Result<(), JobError> {
+        if self.defines.len() > MAX_DEFINES {
+            return Err(JobError::Defines(format!(
+                "{} parameters, above the limit of {MAX_DEFINES}",
+                self.defines.len()
+            )));
+        }
+        if let Some((k, _)) = self
+            .defines
+            .iter()
+            .find(|(k, v)| k.len() > MAX_DEFINE_LEN || v.len() > MAX_DEFINE_LEN)
+        {
+            let shown: String = k.chars().take(40).collect();
+            return Err(JobError::Defines(format!(
+                "parameter \"{shown}\" has a name or value longer than {MAX_DEFINE_LEN} bytes"
+            )));
+        }
+        Ok(())
+    }
+
     /// Resolves against `scene`. `open_ended` allows no pass count (a time-limited render);
     /// otherwise the scene's sample count is the default.
     pub fn resolve(&self, scene: &Scene, open_ended: bool) -> Result<Resolved, JobError> {
@@ -109,6 +152,7 @@ impl JobSettings {
         if self.checkpoint_every == Some(0) {
             return Err(JobError::Zero("the checkpoint interval"));
         }
+        self.check_defines()?;
         let mut warnings = Vec::new();
         let integrator = self.integrator.unwrap_or_else(|| Integrator::of_scene(scene));
         let (method, declared) = match integrator {
@@ -145,7 +189,8 @@ impl JobSettings {
                     .params
                     .iter()
                     .find(|(n, _)| n == "iterations")
-                    .map(|(_, v)| *v as u64);
+                    .map(|(_, v)| declared_iterations(*v))
+                    .transpose()?;
                 (Method::Sppm(s), declared)
             }
         };
@@ -162,5 +207,53 @@ impl JobSettings {
             passes,
             warnings,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn scene_with_iterations(v: &str) -> Scene {
+        let text = format!(
+            r#"<scene version="3.0.0">
+            <integrator type="sppm"><integer name="iterations" value="{v}"/></integrator>
+            <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
+                <integer name="height" value="4"/><rfilter type="box"/></film></sensor>
+            <shape type="sphere"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+            </scene>"#
+        );
+        Scene::from_str(&text, Path::new("t.xml"), &[]).unwrap()
+    }
+
+    #[test]
+    fn declared_iterations_must_be_positive() {
+        let sppm = JobSettings {
+            integrator: Integrator::Sppm,
+            ..JobSettings::default()
+        };
+        for bad in ["0", "-5"] {
+            let e = sppm.resolve(&scene_with_iterations(bad), false).unwrap_err();
+            assert!(matches!(e, JobError::DeclaredIterations(_)), "{bad}: {e}");
+        }
+        let ok = sppm.resolve(&scene_with_iterations("12"), false).unwrap();
+        assert_eq!(ok.passes, Some(12));
+    }
+
+    #[test]
+    fn too_many_defines_are_refused() {
+        let many = JobSettings {
+            defines: (0..MAX_DEFINES + 1)
+                .map(|i| (format!("d{i}"), "1".into()))
+                .collect(),
+            ..JobSettings::default()
+        };
+        assert!(matches!(many.check_defines(), Err(JobError::Defines(_))));
+        let long = JobSettings {
+            defines: vec![("x".into(), "y".repeat(MAX_DEFINE_LEN + 1))],
+            ..JobSettings::default()
+        };
+        assert!(long.check_defines().is_err());
     }
 }

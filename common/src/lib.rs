@@ -14,6 +14,7 @@ pub mod geometry;
 pub mod integrator;
 pub mod job;
 pub mod light;
+pub mod limits;
 pub mod medium;
 #[cfg(feature = "process")]
 pub mod process;

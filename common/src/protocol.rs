@@ -46,6 +46,21 @@ pub struct Lease {
     pub deadline_ms: u64,
     /// How often to heartbeat, in milliseconds.
     pub heartbeat_ms: u64,
+    /// The lease's secret: heartbeats, the result and the release must carry it (header
+    /// [`LEASE_KEY_HEADER`]), so that only the worker granted the lease can use it.
+    pub key: String,
+}
+
+/// The header that carries a lease's secret.
+pub const LEASE_KEY_HEADER: &str = "x-photonfarm-lease-key";
+
+/// The largest encoding of a batch result of a `width` × `height` image: results are checked
+/// against it before they are read, so no upload can be larger than its lease implies.
+pub fn max_encoded_batch(width: u32, height: u32) -> u64 {
+    // Magic, then bincode varints: at most 5 bytes per u32, 9 per u64 (the two vectors'
+    // lengths included) and 10 per zigzag i64: three sums per pixel and, with a filter wider
+    // than a box, one weight.
+    MAGIC.len() as u64 + 2 * 5 + 4 * 9 + width as u64 * height as u64 * 40
 }
 
 /// The coordinator's answer to a heartbeat.
@@ -98,6 +113,13 @@ pub fn decode_batch(bytes: &[u8]) -> Result<FilmSum, CodecError> {
             body.len() - used
         )));
     }
+    if !sum.weights.is_empty() && sum.weights.len() != sum.sums.len() {
+        return Err(CodecError::Invalid(format!(
+            "{} pixel weights for {} pixels",
+            sum.weights.len(),
+            sum.sums.len()
+        )));
+    }
     if sum.sums.len() as u64 != sum.width as u64 * sum.height as u64 {
         return Err(CodecError::Invalid(format!(
             "{} pixels for a {}x{} image",
@@ -125,5 +147,14 @@ mod tests {
         let mut extra = bytes.clone();
         extra.push(0);
         assert!(decode_batch(&extra).is_err());
+        let mut worst = FilmSum::new(3, 2);
+        worst
+            .sums
+            .iter_mut()
+            .for_each(|s| *s = [i64::MIN, i64::MAX, i64::MIN]);
+        worst.weights = vec![i64::MIN; 6];
+        worst.passes = u64::MAX;
+        worst.nonfinite = u64::MAX;
+        assert!(encode_batch(&worst).len() as u64 <= max_encoded_batch(3, 2));
     }
 }

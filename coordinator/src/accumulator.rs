@@ -27,6 +27,17 @@ impl Accumulator {
         }
     }
 
+    /// The same sum with checkpoints every `window` passes.
+    pub fn with_window(mut self, window: u64) -> Accumulator {
+        self.checkpoint_every = window.max(1);
+        self
+    }
+
+    /// The image size.
+    pub fn size(&self) -> (u32, u32) {
+        (self.prefix.width, self.prefix.height)
+    }
+
     /// Passes in the prefix.
     pub fn prefix_passes(&self) -> u64 {
         self.prefix.passes

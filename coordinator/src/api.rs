@@ -2,37 +2,62 @@
 //!
 //! Every failure is a JSON `{"error": "..."}` with a 4xx or 5xx status, never a panic;
 //! internal details of 5xx errors are logged, not sent. Handlers lock the farm only for
-//! bookkeeping; scene loading and decoding happen outside the lock, on blocking threads.
+//! bookkeeping: uploads are read, decoded and written to disk, scenes loaded, sums added and
+//! images encoded outside that lock, on blocking threads.
 
-use std::path::PathBuf;
+use std::path::{Path as FsPath, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use axum::body::Bytes;
+use axum::body::{Body, Bytes};
 use axum::extract::{DefaultBodyLimit, FromRequest, Multipart, Path, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post, put};
 use axum::{Json, Router};
+use photonfarm::bundle::BundleError;
 use photonfarm::job::JobSettings;
-use photonfarm::protocol::{LeaseRequest, Release, decode_batch};
+use photonfarm::protocol::{LEASE_KEY_HEADER, LeaseRequest, Release, decode_batch, max_encoded_batch};
+use photonfarm::render::Method;
 use photonfarm::scene::Scene;
 use serde_json::json;
 use sha2::{Digest, Sha256};
+use tokio::io::AsyncWriteExt;
+use tokio::sync::Semaphore;
 
-use crate::farm::{Farm, FarmError};
+use crate::accumulator::Accumulator;
+use crate::admission::Admission;
+use crate::farm::{Committed, Farm, FarmError};
+use crate::store::Layout;
+
+/// Who may call what: users submit and read jobs, workers lease and render. Separate tokens
+/// keep a worker's credentials (often spread over many machines) from cancelling or reading
+/// users' jobs, and a user's from completing leases.
+#[derive(Clone, Debug, Default)]
+pub struct Tokens {
+    /// Required of `/api/jobs*` requests, if set.
+    pub client: Option<String>,
+    /// Required of `/api/lease`, `/api/leases/*` and `/api/bundles/*` requests, if set.
+    pub worker: Option<String>,
+}
 
 /// Shared by every handler.
 pub struct AppState {
-    /// The farm. A std mutex: critical sections are short and never await.
+    /// The farm. A std mutex: critical sections are short bookkeeping and never await.
     pub farm: Mutex<Farm>,
-    /// Bearer token every request must carry, if set.
-    pub token: Option<String>,
-    /// Largest accepted upload (bundles and batch results), bytes.
-    pub max_upload: usize,
+    /// The data folder's paths, for file work outside the farm's lock.
+    pub layout: Layout,
+    /// Bearer tokens.
+    pub tokens: Tokens,
+    /// The limits every request is held to.
+    pub admission: Admission,
     /// Names scratch folders for incoming bundles.
     pub uploads: AtomicU64,
+    /// Uploads read at once (bounds the memory they take together).
+    pub upload_slots: Semaphore,
+    /// Scene checks at once (loading a scene can take many times its files' size).
+    pub scene_checks: Semaphore,
 }
 
 /// An error response.
@@ -42,6 +67,15 @@ pub struct ApiError(StatusCode, String);
 impl ApiError {
     fn new(status: StatusCode, msg: impl Into<String>) -> ApiError {
         ApiError(status, msg.into())
+    }
+
+    /// A failure of the coordinator: logged in full, reported without details.
+    fn internal(what: impl std::fmt::Display) -> ApiError {
+        tracing::error!("internal error: {what}");
+        ApiError::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal error (see the coordinator's log)",
+        )
     }
 }
 
@@ -58,14 +92,9 @@ impl From<FarmError> for ApiError {
             FarmError::NoJob(_) | FarmError::NoImage(_) => StatusCode::NOT_FOUND,
             FarmError::Lease(LeaseError::NotActive(_)) => StatusCode::CONFLICT,
             FarmError::Lease(LeaseError::JobOver(_)) => StatusCode::GONE,
+            FarmError::NotYours(_) => StatusCode::FORBIDDEN,
             FarmError::BadResult(_) => StatusCode::BAD_REQUEST,
-            FarmError::Store(_) => {
-                tracing::error!("storage error: {e}");
-                return ApiError::new(
-                    StatusCode::INTERNAL_SERVER_ERROR,
-                    "internal storage error (see the coordinator's log)",
-                );
-            }
+            FarmError::Store(_) => return ApiError::internal(format!("storage: {e}")),
         };
         ApiError::new(status, e.to_string())
     }
@@ -73,12 +102,12 @@ impl From<FarmError> for ApiError {
 
 type ApiResult<T> = Result<T, ApiError>;
 
-/// Bodies of JSON endpoints are small; 64 KiB is plenty.
+/// Bodies of JSON endpoints (and the `settings` form field) are small; 64 KiB is plenty.
 const JSON_LIMIT: usize = 64 * 1024;
 
 /// The router.
 pub fn router(state: Arc<AppState>) -> Router {
-    let upload = DefaultBodyLimit::max(state.max_upload);
+    let upload = DefaultBodyLimit::max(state.admission.max_upload as usize);
     Router::new()
         .route("/healthz", get(|| async { Json(json!({ "status": "ok" })) }))
         .route("/api/jobs", post(submit).layer(upload).get(list))
@@ -87,31 +116,65 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/bundles/{hash}", get(bundle))
         .route("/api/lease", post(lease).layer(DefaultBodyLimit::max(JSON_LIMIT)))
         .route("/api/leases/{id}/heartbeat", post(heartbeat))
-        .route("/api/leases/{id}/result", put(result).layer(upload))
+        // The lease's expected size is the real limit of a result (checked in the handler).
+        .route(
+            "/api/leases/{id}/result",
+            put(result).layer(DefaultBodyLimit::disable()),
+        )
         .route(
             "/api/leases/{id}/release",
             post(release).layer(DefaultBodyLimit::max(JSON_LIMIT)),
         )
         .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint (see docs/api.md)") })
         .layer(DefaultBodyLimit::max(JSON_LIMIT))
+        .layer(middleware::from_fn(busy))
         .layer(middleware::from_fn_with_state(state.clone(), auth))
         .with_state(state)
 }
 
-/// With a token configured, every request must carry `Authorization: Bearer TOKEN`.
+/// The token a request's path needs: workers' routes need the worker token, the rest the
+/// client token; `/healthz` takes either.
 async fn auth(State(state): State<Arc<AppState>>, headers: HeaderMap, req: Request, next: Next) -> Response {
-    if let Some(token) = &state.token {
+    let path = req.uri().path();
+    let worker_route =
+        path == "/api/lease" || path.starts_with("/api/leases/") || path.starts_with("/api/bundles/");
+    let wanted: Vec<&String> = if path == "/healthz" {
+        [&state.tokens.client, &state.tokens.worker]
+            .into_iter()
+            .flatten()
+            .collect()
+    } else if worker_route {
+        state.tokens.worker.iter().collect()
+    } else {
+        state.tokens.client.iter().collect()
+    };
+    if !wanted.is_empty() {
         let given = headers
             .get(header::AUTHORIZATION)
             .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "))
-            .unwrap_or("");
-        // Compare digests, so the time taken says nothing about how much of the token matched.
-        if Sha256::digest(given.as_bytes()) != Sha256::digest(token.as_bytes()) {
+            .and_then(|v| v.split_once(' '))
+            // The scheme is case-insensitive (RFC 9110).
+            .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+            .map_or("", |(_, t)| t.trim());
+        // Compare digests, so the time taken says nothing about how much of a token matched.
+        let given = Sha256::digest(given.as_bytes());
+        if !wanted.iter().any(|t| Sha256::digest(t.as_bytes()) == given) {
             return ApiError::new(StatusCode::UNAUTHORIZED, "missing or wrong bearer token").into_response();
         }
     }
     next.run(req).await
+}
+
+/// Marks the connection busy while an authenticated request is handled, so the idle timeout
+/// does not close it under a long handler (see [`crate::connections`]).
+async fn busy(req: Request, next: Next) -> Response {
+    let guard = req
+        .extensions()
+        .get::<axum::extract::ConnectInfo<crate::connections::Busy>>()
+        .map(|b| b.0.enter());
+    let response = next.run(req).await;
+    drop(guard);
+    response
 }
 
 fn parse_id(s: &str) -> ApiResult<u64> {
@@ -131,6 +194,15 @@ async fn body_bytes(req: Request, state: &Arc<AppState>) -> ApiResult<Bytes> {
         .map_err(|e| ApiError::new(e.status(), e.body_text()))
 }
 
+/// The lease secret a worker sent.
+fn lease_key(headers: &HeaderMap) -> String {
+    headers
+        .get(LEASE_KEY_HEADER)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string()
+}
+
 fn with_farm<T>(state: &AppState, f: impl FnOnce(&mut Farm) -> Result<T, FarmError>) -> ApiResult<T> {
     let mut farm = state.farm.lock().unwrap_or_else(|p| p.into_inner());
     f(&mut farm).map_err(ApiError::from)
@@ -139,30 +211,84 @@ fn with_farm<T>(state: &AppState, f: impl FnOnce(&mut Farm) -> Result<T, FarmErr
 async fn blocking<T: Send + 'static>(f: impl FnOnce() -> ApiResult<T> + Send + 'static) -> ApiResult<T> {
     tokio::task::spawn_blocking(f)
         .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, format!("task failed: {e}")))?
+        .map_err(|e| ApiError::internal(format!("task failed: {e}")))?
+}
+
+fn too_large(msg: String) -> ApiError {
+    ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, msg)
+}
+
+/// Reads one multipart field, at most `limit` bytes.
+async fn small_field(
+    field: &mut axum::extract::multipart::Field<'_>,
+    limit: usize,
+    name: &str,
+) -> ApiResult<Vec<u8>> {
+    let mut out = Vec::new();
+    while let Some(chunk) = field
+        .chunk()
+        .await
+        .map_err(|e| ApiError::new(e.status(), e.body_text()))?
+    {
+        if out.len() + chunk.len() > limit {
+            return Err(too_large(format!(
+                "the \"{name}\" field is larger than {limit} bytes"
+            )));
+        }
+        out.extend_from_slice(&chunk);
+    }
+    Ok(out)
+}
+
+/// Streams the bundle field to `path`; returns its SHA-256.
+async fn bundle_to_disk(field: &mut axum::extract::multipart::Field<'_>, path: &FsPath) -> ApiResult<String> {
+    if let Some(dir) = path.parent() {
+        tokio::fs::create_dir_all(dir).await.map_err(ApiError::internal)?;
+    }
+    let mut file = tokio::fs::File::create(path).await.map_err(ApiError::internal)?;
+    let mut hash = Sha256::new();
+    while let Some(chunk) = field
+        .chunk()
+        .await
+        .map_err(|e| ApiError::new(e.status(), e.body_text()))?
+    {
+        hash.update(&chunk);
+        file.write_all(&chunk).await.map_err(ApiError::internal)?;
+    }
+    file.sync_all().await.map_err(ApiError::internal)?;
+    Ok(hex::encode(hash.finalize()))
 }
 
 /// `POST /api/jobs`: multipart with `bundle` (tar), optional `scene` (its path in the bundle)
 /// and optional `settings` (JSON).
 async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<Response> {
-    let mut multipart = Multipart::from_request(req, &state)
+    let _slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
+    let n = state.uploads.fetch_add(1, Ordering::Relaxed);
+    let scratch = state.layout.scratch_dir(&format!("{}-{n}", std::process::id()));
+    let out = receive_and_accept(&state, req, &scratch).await;
+    let _ = tokio::fs::remove_dir_all(&scratch).await;
+    out
+}
+
+async fn receive_and_accept(state: &Arc<AppState>, req: Request, scratch: &FsPath) -> ApiResult<Response> {
+    let mut multipart = Multipart::from_request(req, state)
         .await
         .map_err(|e| ApiError::new(e.status(), e.body_text()))?;
-    let (mut bundle, mut scene, mut settings) = (None, None, JobSettings::default());
-    while let Some(field) = multipart
+    let (mut hash, mut scene, mut settings) = (None, None, JobSettings::default());
+    let archive = scratch.join("bundle.tar");
+    while let Some(mut field) = multipart
         .next_field()
         .await
         .map_err(|e| ApiError::new(e.status(), e.body_text()))?
     {
         let name = field.name().unwrap_or_default().to_string();
-        let data = field
-            .bytes()
-            .await
-            .map_err(|e| ApiError::new(e.status(), e.body_text()))?;
         match name.as_str() {
-            "bundle" => bundle = Some(data),
-            "scene" => scene = Some(String::from_utf8_lossy(&data).into_owned()),
-            "settings" => settings = json_body(&data)?,
+            "bundle" => hash = Some(bundle_to_disk(&mut field, &archive).await?),
+            "scene" => {
+                let data = small_field(&mut field, 4096, "scene").await?;
+                scene = Some(String::from_utf8_lossy(&data).into_owned());
+            }
+            "settings" => settings = json_body(&small_field(&mut field, JSON_LIMIT, "settings").await?)?,
             other => {
                 return Err(ApiError::new(
                     StatusCode::BAD_REQUEST,
@@ -171,35 +297,34 @@ async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<R
             }
         }
     }
-    let bundle =
-        bundle.ok_or_else(|| ApiError::new(StatusCode::BAD_REQUEST, "the form has no \"bundle\" field"))?;
-    let n = state.uploads.fetch_add(1, Ordering::Relaxed);
-    let scratch = state
-        .farm
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .store()
-        .scratch_dir(&format!("{}-{n}", std::process::id()));
+    let hash =
+        hash.ok_or_else(|| ApiError::new(StatusCode::BAD_REQUEST, "the form has no \"bundle\" field"))?;
+    let _check = state.scene_checks.acquire().await.map_err(ApiError::internal)?;
     let st = state.clone();
-    blocking(move || {
-        let out = accept_bundle(&st, &bundle, scene, settings, &scratch);
-        let _ = std::fs::remove_dir_all(&scratch);
-        out
-    })
-    .await
+    let scratch = scratch.to_path_buf();
+    blocking(move || accept_bundle(&st, &archive, &hash, scene, settings, &scratch)).await
 }
 
-/// Unpacks, loads and checks a submitted bundle, then creates the job.
+/// Unpacks, loads and checks a submitted bundle against the limits, then creates the job.
 fn accept_bundle(
     state: &AppState,
-    bundle: &[u8],
+    archive: &FsPath,
+    hash: &str,
     scene: Option<String>,
     settings: JobSettings,
-    scratch: &std::path::Path,
+    scratch: &FsPath,
 ) -> ApiResult<Response> {
     let bad = |m: String| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, m);
-    let files = photonfarm::bundle::unpack(bundle, scratch)
-        .map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e.to_string()))?;
+    let limits = &state.admission;
+    let files_dir = scratch.join("files");
+    let reader = std::fs::File::open(archive).map_err(ApiError::internal)?;
+    let files = photonfarm::bundle::unpack_from(std::io::BufReader::new(reader), &files_dir, &limits.bundle)
+        .map_err(|e| match e {
+            BundleError::Io(..) => ApiError::internal(e),
+            BundleError::TooLarge(_) => too_large(e.to_string()),
+            _ => ApiError::new(StatusCode::BAD_REQUEST, e.to_string()),
+        })?;
+    settings.check_defines().map_err(|e| bad(e.to_string()))?;
     let scene_rel =
         match scene {
             Some(s) => PathBuf::from(s),
@@ -220,33 +345,78 @@ fn accept_bundle(
     if !files.contains(&scene_rel) {
         return Err(bad(format!("the bundle has no file \"{}\"", scene_rel.display())));
     }
+    // What loading reads is bounded before the scene is loaded: parsing the XML or a mesh
+    // takes many times the file's size.
+    let geometry: u64 = files
+        .iter()
+        .filter_map(|f| std::fs::metadata(files_dir.join(f)).ok())
+        .map(|m| m.len())
+        .sum();
+    if geometry > limits.max_geometry {
+        return Err(too_large(format!(
+            "the bundle's files (the scene and its meshes) take {geometry} bytes, above the limit of {} (--max-geometry-mb)",
+            limits.max_geometry
+        )));
+    }
     let loaded =
-        Scene::load_inside(&scratch.join(&scene_rel), &settings.defines, scratch).map_err(|mut e| {
-            // Name files as the user knows them: relative to the bundle.
-            e.file = e.file.strip_prefix(scratch).map(PathBuf::from).unwrap_or(e.file);
-            bad(e.to_string())
+        Scene::load_inside(&files_dir.join(&scene_rel), &settings.defines, &files_dir).map_err(|mut e| {
+            // Name files as the user knows them: relative to the bundle, never by the
+            // coordinator's own paths (the message may quote a resolved path too).
+            e.file = e
+                .file
+                .strip_prefix(&files_dir)
+                .map(PathBuf::from)
+                .unwrap_or(e.file);
+            let ours = files_dir.display().to_string();
+            let real = files_dir
+                .canonicalize()
+                .map_or_else(|_| ours.clone(), |p| p.display().to_string());
+            bad(e
+                .to_string()
+                .replace(&format!("{real}/"), "")
+                .replace(&format!("{ours}/"), ""))
         })?;
     let resolved = settings.resolve(&loaded, false).map_err(|e| bad(e.to_string()))?;
     let total = resolved.passes.expect("closed-ended resolution has a count");
-    let hash = photonfarm::bundle::content_hash(bundle);
-    let mut farm = state.farm.lock().unwrap_or_else(|p| p.into_inner());
-    let (dir, archive) = (farm.store().bundle_dir(&hash), farm.store().bundle_archive(&hash));
-    if !archive.exists() {
-        crate::store::write_durably(&archive, bundle).map_err(FarmError::from)?;
+    limits
+        .job
+        .check_job(loaded.width(), loaded.height(), Some(total), &resolved.render)
+        .map_err(|e| bad(e.to_string()))?;
+    // Everything that takes time or memory, before the lock: the empty sum, the archive and
+    // its unpacked files in their content-addressed places.
+    let window = settings.checkpoint_every.unwrap_or(0);
+    let sum = Accumulator::new(
+        photonfarm::film::FilmSum::new(loaded.width(), loaded.height()),
+        window,
+    );
+    let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
+    if !stored.exists() {
+        std::fs::rename(archive, &stored).map_err(ApiError::internal)?;
+        if let Some(parent) = stored.parent()
+            && let Ok(d) = std::fs::File::open(parent)
+        {
+            let _ = d.sync_all();
+        }
     }
     if !dir.exists() {
-        let _ = std::fs::rename(scratch, &dir);
+        let _ = std::fs::rename(&files_dir, &dir);
     }
-    let id = farm.create_job(
-        &settings,
-        resolved.render,
-        total,
-        &scene_rel.to_string_lossy(),
-        &hash,
-        loaded.width(),
-        loaded.height(),
-    )?;
-    let status = farm.status(id).ok_or(FarmError::NoJob(id))?;
+    let (id, status) = with_farm(state, |farm| {
+        let sum = if window == 0 {
+            sum.with_window(farm.window_of(&settings))
+        } else {
+            sum
+        };
+        let id = farm.create_job(
+            &settings,
+            resolved.render,
+            total,
+            &scene_rel.to_string_lossy(),
+            hash,
+            sum,
+        )?;
+        Ok((id, farm.status(id).ok_or(FarmError::NoJob(id))?))
+    })?;
     tracing::info!(job = id, total, "job accepted");
     let mut body = serde_json::to_value(status).expect("status serialises");
     body["warnings"] = json!(
@@ -276,6 +446,32 @@ async fn cancel(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> A
     Ok(Json(s).into_response())
 }
 
+/// A file as a streamed response: never read whole into memory.
+async fn stream_file(path: &FsPath, mime: &'static str) -> ApiResult<Response> {
+    let file = tokio::fs::File::open(path).await.map_err(ApiError::internal)?;
+    let len = file.metadata().await.map_err(ApiError::internal)?.len();
+    let stream = futures_util::stream::unfold(file, |mut file| async move {
+        use tokio::io::AsyncReadExt;
+        let mut buf = vec![0u8; 64 * 1024];
+        match file.read(&mut buf).await {
+            Ok(0) => None,
+            Ok(n) => {
+                buf.truncate(n);
+                Some((Ok::<_, std::io::Error>(Bytes::from(buf)), file))
+            }
+            Err(e) => Some((Err(e), file)),
+        }
+    });
+    Ok((
+        [
+            (header::CONTENT_TYPE, mime.to_string()),
+            (header::CONTENT_LENGTH, len.to_string()),
+        ],
+        Body::from_stream(stream),
+    )
+        .into_response())
+}
+
 async fn image(
     State(state): State<Arc<AppState>>,
     Path((id, file)): Path<(String, String)>,
@@ -292,31 +488,15 @@ async fn image(
         }
     };
     let path = with_farm(&state, |f| f.image(id, ext))?;
-    let bytes = tokio::fs::read(&path).await.map_err(|e| {
-        ApiError::new(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("cannot read the image: {e}"),
-        )
-    })?;
-    Ok(([(header::CONTENT_TYPE, mime)], bytes).into_response())
+    stream_file(&path, mime).await
 }
 
 async fn bundle(State(state): State<Arc<AppState>>, Path(hash): Path<String>) -> ApiResult<Response> {
-    let path = with_farm(&state, |f| {
-        if f.knows_bundle(&hash) {
-            Ok(Some(f.store().bundle_archive(&hash)))
-        } else {
-            Ok(None)
-        }
-    })?
-    .ok_or_else(|| ApiError::new(StatusCode::NOT_FOUND, "no such bundle"))?;
-    let bytes = tokio::fs::read(&path).await.map_err(|e| {
-        ApiError::new(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("cannot read the bundle: {e}"),
-        )
-    })?;
-    Ok(([(header::CONTENT_TYPE, "application/x-tar")], bytes).into_response())
+    let known = with_farm(&state, |f| Ok(f.knows_bundle(&hash)))?;
+    if !known {
+        return Err(ApiError::new(StatusCode::NOT_FOUND, "no such bundle"));
+    }
+    stream_file(&state.layout.bundle_archive(&hash), "application/x-tar").await
 }
 
 async fn lease(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<Response> {
@@ -328,44 +508,155 @@ async fn lease(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<Re
             "worker names are 1 to 200 bytes",
         ));
     }
-    match with_farm(&state, |f| f.lease(&req))? {
-        Some(l) => Ok(Json(l).into_response()),
-        None => Ok(StatusCode::NO_CONTENT.into_response()),
+    let Some(mut lease) = with_farm(&state, |f| f.lease(&req))? else {
+        return Ok(StatusCode::NO_CONTENT.into_response());
+    };
+    // The radii cost time in proportion to the pass index: computed outside the lock.
+    if let Method::Sppm(s) = lease.settings.method {
+        let range = lease.start..lease.end;
+        lease.radii = blocking(move || Ok(s.radii(range))).await?;
     }
+    Ok(Json(lease).into_response())
 }
 
-async fn heartbeat(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> ApiResult<Response> {
+async fn heartbeat(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
     let id = parse_id(&id)?;
-    Ok(Json(with_farm(&state, |f| f.heartbeat(id))?).into_response())
+    let key = lease_key(&headers);
+    Ok(Json(with_farm(&state, |f| f.heartbeat(id, &key))?).into_response())
 }
 
+/// `PUT /api/leases/{id}/result`: checked against the lease's expected size before it is
+/// read, decoded and written to disk outside the lock, then counted, then merged into the
+/// job's sum under the job's own lock.
 async fn result(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
+    headers: HeaderMap,
     req: Request,
 ) -> ApiResult<Response> {
     let id = parse_id(&id)?;
-    // Refuse a dead lease before reading a large body.
-    with_farm(&state, |f| f.expected_result(id))?;
-    let body = body_bytes(req, &state).await?;
-    let len = body.len() as u64;
-    let sum = blocking(move || {
-        decode_batch(&body).map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, e.to_string()))
-    })
-    .await?;
+    let key = lease_key(&headers);
+    // Refuse a dead lease, or one of another worker, before reading a large body.
+    let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
+    let max = max_encoded_batch(expected.width, expected.height);
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    let over = |n: String| {
+        too_large(format!(
+            "a result for lease {id} ({}x{}) is at most {max} bytes; this one is {n}",
+            expected.width, expected.height
+        ))
+    };
+    if let Some(n) = declared
+        && n > max
+    {
+        return Err(over(n.to_string()));
+    }
+    let _slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
+    let body = axum::body::to_bytes(req.into_body(), max as usize)
+        .await
+        .map_err(|_| over("larger".into()))?;
     let st = state.clone();
-    blocking(move || with_farm(&st, |f| f.complete(id, sum, len))).await?;
+    blocking(move || store_result(&st, id, &key, expected, body)).await?;
     Ok(Json(json!({ "accepted": true })).into_response())
+}
+
+/// Decodes, checks and stores a result, counts it, and merges it (writing any checkpoint).
+fn store_result(
+    state: &AppState,
+    id: u64,
+    key: &str,
+    expected: crate::farm::Expected,
+    body: Bytes,
+) -> ApiResult<()> {
+    let len = body.len() as u64;
+    let sum = match decode_batch(&body) {
+        Ok(sum)
+            if (sum.width, sum.height) == (expected.width, expected.height)
+                && sum.passes == expected.end - expected.start =>
+        {
+            sum
+        }
+        other => {
+            let msg = match other {
+                Ok(sum) => format!(
+                    "expected {}x{} and {} passes, got {}x{} and {}",
+                    expected.width,
+                    expected.height,
+                    expected.end - expected.start,
+                    sum.width,
+                    sum.height,
+                    sum.passes
+                ),
+                Err(e) => e.to_string(),
+            };
+            with_farm(state, |f| f.reject(id, &msg))?;
+            return Err(ApiError::from(FarmError::BadResult(msg)));
+        }
+    };
+    // The body is the batch's encoding: stored as received, then dropped.
+    state
+        .layout
+        .write_batch_bytes(expected.job, expected.start, expected.end, &body, id)
+        .map_err(|e| ApiError::internal(format!("storage: {e}")))?;
+    drop(body);
+    let Committed {
+        job,
+        sum: job_sum,
+        total,
+    } = with_farm(state, |f| f.commit(id, key, len))?;
+    merge(state, job, &job_sum, total, expected.start, sum)
+}
+
+/// Adds a counted result to its job's sum under the job's lock; writes the prefix and the
+/// images at a checkpoint or at the end, then tells the farm.
+fn merge(
+    state: &AppState,
+    job: u64,
+    job_sum: &crate::farm::JobSum,
+    total: u64,
+    start: u64,
+    sum: photonfarm::film::FilmSum,
+) -> ApiResult<()> {
+    let mut acc = job_sum.lock().unwrap_or_else(|p| p.into_inner());
+    let (checkpoints, _) = acc
+        .add(start, sum)
+        .map_err(|e| ApiError::internal(format!("job {job}: {e}")))?;
+    let finished = acc.prefix_passes() >= total;
+    let image = if finished {
+        Some(acc.prefix())
+    } else {
+        checkpoints.last()
+    };
+    let Some(image) = image else {
+        return Ok(());
+    };
+    // The prefix file first: the checkpoint images must never be ahead of it.
+    let storage = |e| ApiError::internal(format!("storage: {e}"));
+    state.layout.write_prefix(job, acc.prefix()).map_err(storage)?;
+    state.layout.write_images(job, image).map_err(storage)?;
+    let (prefix, image_passes) = (acc.prefix_passes(), image.passes);
+    drop(acc);
+    with_farm(state, |f| f.checkpointed(job, prefix, Some(image_passes)))
 }
 
 async fn release(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
+    headers: HeaderMap,
     req: Request,
 ) -> ApiResult<Response> {
     let id = parse_id(&id)?;
+    let key = lease_key(&headers);
     let body = body_bytes(req, &state).await?;
     let r: Release = json_body(&body)?;
-    with_farm(&state, |f| f.release(id, r.error.as_deref()))?;
+    let error = r.error.map(|e| e.chars().take(2000).collect::<String>());
+    with_farm(&state, |f| f.release(id, &key, error.as_deref()))?;
     Ok(Json(json!({ "released": true })).into_response())
 }

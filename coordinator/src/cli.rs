@@ -195,6 +195,34 @@ pub struct RenderArgs {
     /// Worker threads (default: one per core). Does not change the image.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Size limits (as for `coordinator serve`).
+    #[command(flatten)]
+    pub limits: LimitArgs,
+}
+
+/// The job size limits, for `render` (the service has its own, with more).
+#[derive(Debug, clap::Args)]
+pub struct LimitArgs {
+    /// Largest film, in pixels (width × height) [default: memory / 512 B].
+    #[arg(long)]
+    pub max_pixels: Option<u64>,
+    /// Most passes [default: 10000000].
+    #[arg(long)]
+    pub max_passes: Option<u64>,
+    /// Most SPPM photons per iteration [default: memory / 256 B].
+    #[arg(long)]
+    pub max_photons: Option<u64>,
+}
+
+impl LimitArgs {
+    /// This machine's limits, overridden by the flags.
+    pub fn limits(&self) -> photonfarm::limits::Limits {
+        let mut l = photonfarm::limits::Limits::for_this_machine();
+        l.max_pixels = self.max_pixels.unwrap_or(l.max_pixels);
+        l.max_passes = self.max_passes.unwrap_or(l.max_passes);
+        l.max_photons = self.max_photons.unwrap_or(l.max_photons);
+        l
+    }
 }
 
 /// `coordinator serve`.
@@ -206,12 +234,48 @@ pub struct ServeArgs {
     /// Data folder: the SQLite database, job bundles, partial sums and images.
     #[arg(long)]
     pub data: PathBuf,
-    /// Require `Authorization: Bearer TOKEN` on every request.
+    /// Require `Authorization: Bearer TOKEN` of users (`/api/jobs*`), and of workers too
+    /// unless --worker-token is given.
     #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
-    /// Largest upload (a job bundle or a batch result), in MiB.
+    /// Require `Authorization: Bearer TOKEN` of workers (`/api/lease`, `/api/leases/*`,
+    /// `/api/bundles/*`); the users' token is then refused there.
+    #[arg(long, env = "PHOTONFARM_WORKER_TOKEN", hide_env_values = true)]
+    pub worker_token: Option<String>,
+    /// Largest upload (a job bundle; a batch result is also held to its lease's size), in MiB.
     #[arg(long, default_value_t = 512)]
-    pub max_upload_mb: usize,
+    pub max_upload_mb: u64,
+    /// Largest film of a job, in pixels (width × height) [default: memory / 512 B].
+    #[arg(long)]
+    pub max_pixels: Option<u64>,
+    /// Most passes (samples per pixel or SPPM iterations) of a job [default: 10000000].
+    #[arg(long)]
+    pub max_passes: Option<u64>,
+    /// Most SPPM photons per iteration [default: memory / 256 B].
+    #[arg(long)]
+    pub max_photons: Option<u64>,
+    /// Most bytes of a bundle's files (the scene and its meshes), in MiB
+    /// [default: memory / 128].
+    #[arg(long)]
+    pub max_geometry_mb: Option<u64>,
+    /// Most files in a bundle.
+    #[arg(long, default_value_t = 10_000)]
+    pub max_bundle_files: usize,
+    /// Most bytes a bundle may unpack to, in MiB [default: memory / 16].
+    #[arg(long)]
+    pub max_bundle_mb: Option<u64>,
+    /// Uploads (bundles and results) read at the same time.
+    #[arg(long, default_value_t = 4)]
+    pub max_uploads: usize,
+    /// Open connections at most; more wait to be accepted.
+    #[arg(long, default_value_t = 256)]
+    pub max_connections: usize,
+    /// Seconds of silence after which a connection is closed.
+    #[arg(long, default_value_t = 60)]
+    pub idle_timeout: u64,
+    /// Seconds a request head may take to arrive, from its first byte.
+    #[arg(long, default_value_t = 10)]
+    pub header_timeout: u64,
     /// Seconds without a heartbeat after which a batch goes to another worker.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,

@@ -1,18 +1,26 @@
 //! The farm's state and rules: jobs, their schedulers and sums, kept durable in the store.
 //! The HTTP layer ([`crate::api`]) only translates requests into these calls.
+//!
+//! The farm sits behind one mutex, so every method here is bookkeeping only: no fsync, no
+//! image encoding, no per-pixel work and no allocation proportional to a job's size. Those
+//! happen in the callers, outside the lock: a result is decoded and written to disk before
+//! [`Farm::commit`] counts it, and it is added to its job's sum under that job's own mutex
+//! ([`JobSum`]), which [`Farm::commit`] hands out.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
+use std::hash::{BuildHasher, Hasher};
+use std::sync::{Arc, Mutex};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
-use photonfarm::film::FilmSum;
 use photonfarm::job::JobSettings;
+use photonfarm::limits::Limits;
 use photonfarm::protocol::{HeartbeatReply, Lease, LeaseRequest};
 use photonfarm::render::{Method, RenderSettings};
 use serde::Serialize;
 
 use crate::accumulator::Accumulator;
-use crate::scheduler::{JobState, LeaseError, Scheduler, SchedulerConfig};
-use crate::store::{Store, StoreError};
+use crate::scheduler::{Grant, JobState, LeaseError, Scheduler, SchedulerConfig};
+use crate::store::{JobRow, Layout, Store, StoreError};
 
 /// Farm settings.
 #[derive(Clone, Copy, Debug)]
@@ -21,6 +29,8 @@ pub struct FarmConfig {
     pub scheduler: SchedulerConfig,
     /// Checkpoint interval of jobs that do not set one.
     pub default_checkpoint: u64,
+    /// The largest job admitted (also applied to jobs found in the database at start).
+    pub limits: Limits,
 }
 
 impl Default for FarmConfig {
@@ -28,6 +38,7 @@ impl Default for FarmConfig {
         FarmConfig {
             scheduler: SchedulerConfig::default(),
             default_checkpoint: 64,
+            limits: Limits::for_this_machine(),
         }
     }
 }
@@ -41,6 +52,9 @@ pub enum FarmError {
     /// The lease cannot be used.
     #[error(transparent)]
     Lease(#[from] LeaseError),
+    /// The lease was granted to another worker (its key does not match).
+    #[error("lease {0} was granted to another worker")]
+    NotYours(u64),
     /// The uploaded result does not fit its lease.
     #[error("result does not match the lease: {0}")]
     BadResult(String),
@@ -87,6 +101,10 @@ pub struct JobStatus {
     pub bytes_received: u64,
 }
 
+/// A job's running sum, with its own lock: merging a result and writing the prefix and the
+/// checkpoint images happen under it, never under the farm's.
+pub type JobSum = Arc<Mutex<Accumulator>>;
+
 struct JobEntry {
     created_ms: u64,
     render: RenderSettings,
@@ -96,16 +114,43 @@ struct JobEntry {
     width: u32,
     height: u32,
     total: u64,
-    /// SPPM (surface, volume) radii of every pass, computed once so every batch gets the
-    /// same bits.
-    radii: Vec<[f32; 2]>,
-    acc: Accumulator,
+    /// The running sum while the job may still receive results. None once the job is over:
+    /// its sums are on disk, and a finished job holds no pixels in memory.
+    sum: Option<JobSum>,
+    /// Passes in the latest image on disk (the job is reported done only once this reaches
+    /// the total, so a client told "done" always finds the final image).
+    image_passes: u64,
     started: Option<Instant>,
     finished: Option<Instant>,
     /// Passes already done when this process started (for an honest rate after a restart).
     done_at_start: u64,
     batches_received: u64,
     bytes_received: u64,
+}
+
+/// A result the caller may add to the job's sum: counted and recorded by [`Farm::commit`].
+pub struct Committed {
+    /// The job.
+    pub job: u64,
+    /// The job's sum.
+    pub sum: JobSum,
+    /// The job's pass count.
+    pub total: u64,
+}
+
+/// What a result for a lease must be (checked before the body is read and decoded).
+#[derive(Clone, Copy, Debug)]
+pub struct Expected {
+    /// The job.
+    pub job: u64,
+    /// First pass.
+    pub start: u64,
+    /// One past the last.
+    pub end: u64,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
 }
 
 /// The coordinator's state.
@@ -119,6 +164,11 @@ pub struct Farm {
     /// Workers heartbeat four times per timeout, so one lost heartbeat never costs a lease.
     heartbeat_ms: u64,
     default_checkpoint: u64,
+    /// The secret of each live lease: only the worker it was granted to knows it, so no other
+    /// token holder can heartbeat, complete or release it.
+    lease_keys: HashMap<u64, String>,
+    /// Seeds the lease secrets (randomly keyed by the standard library per process).
+    key_source: std::collections::hash_map::RandomState,
 }
 
 fn unix_ms() -> u64 {
@@ -127,64 +177,43 @@ fn unix_ms() -> u64 {
         .map_or(0, |d| d.as_millis() as u64)
 }
 
-fn radii_for(render: &RenderSettings, total: u64) -> Vec<[f32; 2]> {
-    match &render.method {
-        Method::Sppm(s) => s.radii(0..total),
-        Method::Path(_) | Method::Direct(_) => Vec::new(),
-    }
+/// A job as restored from the store, or why it cannot be.
+struct Restored {
+    entry: JobEntry,
+    done: Vec<(u64, u64)>,
+    next_start: u64,
+    state: JobState,
 }
 
 impl Farm {
-    /// Opens the store and resumes every unfinished job from its durable state.
+    /// Opens the store and resumes every unfinished job from its durable state. A job that
+    /// cannot be restored (damaged files, sizes beyond the limits) is marked failed with a
+    /// message; it never stops the others, or the coordinator, from starting.
     pub fn open(mut store: Store, config: FarmConfig) -> Result<Farm, FarmError> {
         let first_lease = store.reserve_lease_ids()?;
         let mut scheduler = Scheduler::new(config.scheduler, first_lease);
         let mut jobs = BTreeMap::new();
         for row in store.load_jobs()? {
-            let render: RenderSettings = serde_json::from_str(&row.render)
-                .map_err(|e| StoreError::Corrupt(format!("job {}", row.id), e.to_string()))?;
-            let settings: JobSettings = serde_json::from_str(&row.settings)
-                .map_err(|e| StoreError::Corrupt(format!("job {}", row.id), e.to_string()))?;
-            let prefix = store.load_prefix(row.id, row.width, row.height)?;
-            let mut acc = Accumulator::new(prefix, row.window);
-            let mut done = vec![(0, acc.prefix_passes())];
-            if !row.state.is_final() {
-                for (start, sum) in store.load_batches(row.id)? {
-                    done.push((start, start + sum.passes));
-                    acc.add(start, sum)
-                        .map_err(|e| StoreError::Corrupt(format!("job {}", row.id), e.to_string()))?;
+            let id = row.id;
+            match restore(&mut store, &row, &config.limits) {
+                Ok(r) => {
+                    if r.state != row.state {
+                        store.update_job(id, row.next_start, r.state, None)?;
+                    }
+                    scheduler.add_job(id, row.total, row.window, r.next_start, &r.done, r.state);
+                    let mut entry = r.entry;
+                    entry.done_at_start = scheduler.status(id).map_or(0, |s| s.1);
+                    jobs.insert(id, entry);
+                }
+                Err(message) => {
+                    tracing::error!(job = id, "cannot resume: {message}");
+                    let message = format!("the coordinator could not resume this job: {message}");
+                    store.update_job(id, row.next_start, JobState::Failed, Some(&message))?;
+                    scheduler.add_job(id, row.total, row.window, row.next_start, &[], JobState::Failed);
+                    scheduler.set_failed(id, message);
+                    jobs.insert(id, entry_of(&row, placeholder_render(&row), Vec::new(), None));
                 }
             }
-            let mut state = row.state;
-            if !state.is_final() && acc.prefix_passes() >= row.total {
-                // Every pass was stored but the coordinator stopped before finishing the job.
-                store.save_prefix(row.id, acc.prefix())?;
-                store.write_images(row.id, acc.prefix())?;
-                state = JobState::Done;
-                store.update_job(row.id, row.next_start, state, None)?;
-            }
-            scheduler.add_job(row.id, row.total, row.window, row.next_start, &done, state);
-            let done_at_start = scheduler.status(row.id).map_or(0, |s| s.1);
-            jobs.insert(
-                row.id,
-                JobEntry {
-                    created_ms: row.created_ms,
-                    radii: radii_for(&render, row.total),
-                    render,
-                    scene: row.scene,
-                    bundle: row.bundle,
-                    defines: settings.defines,
-                    width: row.width,
-                    height: row.height,
-                    total: row.total,
-                    acc,
-                    started: None,
-                    finished: None,
-                    done_at_start,
-                    batches_received: 0,
-                    bytes_received: 0,
-                },
-            );
         }
         Ok(Farm {
             store,
@@ -194,6 +223,8 @@ impl Farm {
             lease_timeout_ms: config.scheduler.lease_timeout_ms,
             heartbeat_ms: (config.scheduler.lease_timeout_ms / 4).max(10),
             default_checkpoint: config.default_checkpoint,
+            lease_keys: HashMap::new(),
+            key_source: std::collections::hash_map::RandomState::new(),
         })
     }
 
@@ -206,12 +237,21 @@ impl Farm {
         &self.store
     }
 
-    /// Mutable store access (saving bundles at submission).
-    pub fn store_mut(&mut self) -> &mut Store {
-        &mut self.store
+    /// The data folder's paths, for file work outside the lock.
+    pub fn layout(&self) -> Layout {
+        self.store.layout().clone()
     }
 
-    /// Creates a job from settings already checked against the loaded scene.
+    /// The checkpoint interval a job with these settings gets.
+    pub fn window_of(&self, settings: &JobSettings) -> u64 {
+        settings
+            .checkpoint_every
+            .unwrap_or(self.default_checkpoint)
+            .max(1)
+    }
+
+    /// Creates a job from settings already checked against the loaded scene and the limits;
+    /// `sum` is its empty sum, allocated by the caller outside the lock.
     #[allow(clippy::too_many_arguments)]
     pub fn create_job(
         &mut self,
@@ -220,13 +260,10 @@ impl Farm {
         total: u64,
         scene: &str,
         bundle: &str,
-        width: u32,
-        height: u32,
+        sum: Accumulator,
     ) -> Result<u64, FarmError> {
-        let window = settings
-            .checkpoint_every
-            .unwrap_or(self.default_checkpoint)
-            .max(1);
+        let window = self.window_of(settings);
+        let (width, height) = sum.size();
         let id = self.store.insert_job(
             unix_ms(),
             &serde_json::to_string(settings).expect("settings serialise"),
@@ -240,61 +277,85 @@ impl Farm {
         )?;
         self.scheduler
             .add_job(id, total, window, 0, &[], JobState::Queued);
+        let row = JobRow {
+            id,
+            created_ms: unix_ms(),
+            settings: String::new(),
+            render: String::new(),
+            scene: scene.to_string(),
+            bundle: bundle.to_string(),
+            total,
+            window,
+            next_start: 0,
+            state: JobState::Queued,
+            message: None,
+            width,
+            height,
+            image_passes: 0,
+        };
         self.jobs.insert(
             id,
-            JobEntry {
-                created_ms: unix_ms(),
-                radii: radii_for(&render, total),
+            entry_of(
+                &row,
                 render,
-                scene: scene.to_string(),
-                bundle: bundle.to_string(),
-                defines: settings.defines.clone(),
-                width,
-                height,
-                total,
-                acc: Accumulator::new(FilmSum::new(width, height), window),
-                started: None,
-                finished: None,
-                done_at_start: 0,
-                batches_received: 0,
-                bytes_received: 0,
-            },
+                settings.defines.clone(),
+                Some(Arc::new(Mutex::new(sum))),
+            ),
         );
         Ok(id)
     }
 
-    /// Grants a batch to a worker, if any job has work for it.
+    fn new_key(&self) -> String {
+        let mut a = self.key_source.build_hasher();
+        a.write_u64(self.scheduler.next_lease_id());
+        let mut b = self.key_source.build_hasher();
+        b.write_u64(!self.scheduler.next_lease_id());
+        b.write_u128(Instant::now().duration_since(self.epoch).as_nanos());
+        format!("{:016x}{:016x}", a.finish(), b.finish())
+    }
+
+    /// Grants a batch to a worker, if any job has work for it. SPPM radii are left empty:
+    /// the caller fills them from the returned settings outside the lock (their cost grows
+    /// with the pass index).
     pub fn lease(&mut self, req: &LeaseRequest) -> Result<Option<Lease>, FarmError> {
         let now = self.now();
+        let key = self.new_key();
         let Some(g) = self.scheduler.lease(&req.worker, now) else {
             return Ok(None);
         };
+        self.lease_keys.insert(g.lease_id, key.clone());
         let job = self.jobs.get_mut(&g.job_id).expect("scheduled jobs are known");
         job.started.get_or_insert_with(Instant::now);
-        let radii = if job.radii.is_empty() {
-            Vec::new()
-        } else {
-            job.radii[g.start as usize..g.end as usize].to_vec()
-        };
         let lease = Lease {
             lease_id: g.lease_id,
             job_id: g.job_id,
             start: g.start,
             end: g.end,
-            radii,
+            radii: Vec::new(),
             settings: job.render,
             bundle: job.bundle.clone(),
             scene: job.scene.clone(),
             defines: job.defines.clone(),
             deadline_ms: self.lease_timeout_ms,
             heartbeat_ms: self.heartbeat_ms,
+            key,
         };
         self.persist_progress(g.job_id)?;
         Ok(Some(lease))
     }
 
+    /// Checks that `key` is the secret of live lease `lease_id`.
+    fn check_key(&self, lease_id: u64, key: &str) -> Result<(), FarmError> {
+        match self.lease_keys.get(&lease_id) {
+            None => Err(LeaseError::NotActive(lease_id).into()),
+            Some(k) if k.as_bytes() == key.as_bytes() => Ok(()),
+            Some(_) => Err(FarmError::NotYours(lease_id)),
+        }
+    }
+
     /// Extends a lease.
-    pub fn heartbeat(&mut self, lease_id: u64) -> Result<HeartbeatReply, FarmError> {
+    pub fn heartbeat(&mut self, lease_id: u64, key: &str) -> Result<HeartbeatReply, FarmError> {
+        self.check_key(lease_id, key)?;
         let now = self.now();
         let deadline = self.scheduler.heartbeat(lease_id, now)?;
         Ok(HeartbeatReply {
@@ -302,83 +363,104 @@ impl Farm {
         })
     }
 
-    /// Image size and pass count a lease's result must have (checked before decoding).
-    pub fn expected_result(&self, lease_id: u64) -> Result<(u32, u32, u64), FarmError> {
+    /// Image size and pass range a lease's result must have (checked before reading it).
+    pub fn expected_result(&self, lease_id: u64, key: &str) -> Result<Expected, FarmError> {
+        self.check_key(lease_id, key)?;
         let g = self.scheduler.lease_range(lease_id, self.now())?;
         let job = &self.jobs[&g.job_id];
-        Ok((job.width, job.height, g.end - g.start))
+        Ok(Expected {
+            job: g.job_id,
+            start: g.start,
+            end: g.end,
+            width: job.width,
+            height: job.height,
+        })
     }
 
-    /// Accepts a batch result (`bytes` long on the wire): stored durably, counted once, merged
-    /// in pass order.
-    pub fn complete(&mut self, lease_id: u64, sum: FilmSum, bytes: u64) -> Result<(), FarmError> {
+    /// Refuses a lease's result that does not fit it: the lease ends as a failure of its
+    /// worker.
+    pub fn reject(&mut self, lease_id: u64, why: &str) -> Result<(), FarmError> {
+        self.scheduler.release(lease_id, Some(why))?;
+        self.lease_keys.remove(&lease_id);
+        Ok(())
+    }
+
+    /// Counts a result already stored durably (by [`Layout::write_batch`]): the lease ends,
+    /// its passes count once and the batch is recorded. The caller then adds the sum to the
+    /// returned [`JobSum`] and calls [`Farm::checkpointed`] after writing any checkpoint.
+    pub fn commit(&mut self, lease_id: u64, key: &str, bytes: u64) -> Result<Committed, FarmError> {
+        self.check_key(lease_id, key)?;
         let now = self.now();
-        let g = self.scheduler.lease_range(lease_id, now)?;
-        let (w, h) = {
-            let job = &self.jobs[&g.job_id];
-            (job.width, job.height)
-        };
-        if (sum.width, sum.height) != (w, h) || sum.passes != g.end - g.start {
-            let msg = format!(
-                "expected {w}x{h} and {} passes, got {}x{} and {}",
-                g.end - g.start,
-                sum.width,
-                sum.height,
-                sum.passes
-            );
-            self.scheduler.release(lease_id, Some(&msg))?;
-            return Err(FarmError::BadResult(msg));
-        }
-        self.store.save_batch(g.job_id, g.start, &sum)?;
-        self.scheduler.complete(lease_id, now)?;
+        let g: Grant = self.scheduler.complete(lease_id, now)?;
+        self.lease_keys.remove(&lease_id);
+        self.store.record_batch(g.job_id, g.start, g.end)?;
         let job = self.jobs.get_mut(&g.job_id).expect("known");
         job.batches_received += 1;
         job.bytes_received += bytes;
-        let (checkpoints, _) = job
-            .acc
-            .add(g.start, sum)
-            .map_err(|e| FarmError::BadResult(e.to_string()))?;
-        let finished = job.acc.prefix_passes() >= job.total;
-        if finished {
-            job.finished = Some(Instant::now());
-        }
-        // The latest checkpoint: the whole prefix once the job is finished.
-        let latest = if finished {
-            Some(job.acc.prefix())
-        } else {
-            checkpoints.last()
+        // A job that takes results holds its sum; should that ever not hold, the result is
+        // stored and recorded, and a restart merges it.
+        let sum = job.sum.clone().ok_or(LeaseError::JobOver(g.job_id))?;
+        let committed = Committed {
+            job: g.job_id,
+            sum,
+            total: job.total,
         };
-        if let Some(image) = latest {
-            // The prefix file first: the checkpoint images must never be ahead of it.
-            self.store.save_prefix(g.job_id, job.acc.prefix())?;
-            self.store.write_images(g.job_id, image)?;
+        self.persist_progress(g.job_id)?;
+        Ok(committed)
+    }
+
+    /// Records that the prefix of `prefix_passes` passes is on disk, and the image of
+    /// `image_passes` (if one was written); once the final image is there the job is done
+    /// and its sum leaves memory.
+    pub fn checkpointed(
+        &mut self,
+        job_id: u64,
+        prefix_passes: u64,
+        image_passes: Option<u64>,
+    ) -> Result<(), FarmError> {
+        self.store.forget_merged(job_id, prefix_passes)?;
+        let job = self.jobs.get_mut(&job_id).ok_or(FarmError::NoJob(job_id))?;
+        if let Some(p) = image_passes
+            && p > job.image_passes
+        {
+            job.image_passes = p;
+            self.store.set_image_passes(job_id, p)?;
         }
-        self.persist_progress(g.job_id)
+        if job.image_passes >= job.total {
+            job.finished.get_or_insert_with(Instant::now);
+            job.sum = None;
+        }
+        self.persist_progress(job_id)
     }
 
     /// Gives a lease back, after a failure or cleanly.
-    pub fn release(&mut self, lease_id: u64, error: Option<&str>) -> Result<(), FarmError> {
+    pub fn release(&mut self, lease_id: u64, key: &str, error: Option<&str>) -> Result<(), FarmError> {
+        self.check_key(lease_id, key)?;
         let job = self
             .scheduler
             .lease_range(lease_id, self.now())
             .map(|g| g.job_id)
             .ok();
         self.scheduler.release(lease_id, error)?;
+        self.lease_keys.remove(&lease_id);
         if let Some(job) = job {
             self.persist_progress(job)?;
         }
         Ok(())
     }
 
-    /// Ends expired leases so their passes go to other workers.
+    /// Ends expired leases so their passes go to other workers (each expiry counts as a
+    /// failure of the worker that held it).
     pub fn expire(&mut self) -> Result<usize, FarmError> {
         let expired = self.scheduler.expire(self.now());
-        for (lease, job) in &expired {
+        for &(lease, job) in &expired {
             tracing::warn!(
                 lease,
                 job,
                 "lease expired without a heartbeat; its passes will be re-issued"
             );
+            self.lease_keys.remove(&lease);
+            self.persist_progress(job)?;
         }
         Ok(expired.len())
     }
@@ -388,12 +470,32 @@ impl Farm {
         if !self.scheduler.cancel(id) {
             return Err(FarmError::NoJob(id));
         }
+        let scheduler = &self.scheduler;
+        self.lease_keys.retain(|&l, _| scheduler.is_live(l));
         self.persist_progress(id)?;
         self.status(id).ok_or(FarmError::NoJob(id))
     }
 
+    /// The state as reported and stored: a job whose every pass is in but whose final image
+    /// is not yet written is still running.
+    fn reported_state(&self, id: u64) -> Option<(JobState, u64, u64, Option<String>)> {
+        let (mut state, done, total, message) = self.scheduler.status(id)?;
+        let job = self.jobs.get(&id)?;
+        if state == JobState::Done && job.image_passes < job.total {
+            state = JobState::Running;
+        }
+        Some((state, done, total, message))
+    }
+
     fn persist_progress(&mut self, id: u64) -> Result<(), FarmError> {
-        let (state, _, _, message) = self.scheduler.status(id).ok_or(FarmError::NoJob(id))?;
+        let (state, _, _, message) = self.reported_state(id).ok_or(FarmError::NoJob(id))?;
+        if state.is_final()
+            && let Some(job) = self.jobs.get_mut(&id)
+        {
+            // Failed or cancelled: nothing will be added to the sum again.
+            job.sum = None;
+            job.finished.get_or_insert_with(Instant::now);
+        }
         let next = self.scheduler.next_start(id).unwrap_or(0);
         self.store.update_job(id, next, state, message.as_deref())?;
         Ok(())
@@ -402,7 +504,7 @@ impl Farm {
     /// A job's status.
     pub fn status(&self, id: u64) -> Option<JobStatus> {
         let job = self.jobs.get(&id)?;
-        let (state, done, total, message) = self.scheduler.status(id)?;
+        let (state, done, total, message) = self.reported_state(id)?;
         let elapsed = match (job.started, job.finished) {
             (Some(s), Some(f)) => (f - s).as_secs_f64(),
             (Some(s), None) => s.elapsed().as_secs_f64(),
@@ -418,7 +520,7 @@ impl Farm {
             state,
             iterations_done: done,
             iterations_total: total,
-            checkpoint_iterations: job.acc.prefix_passes(),
+            checkpoint_iterations: job.image_passes,
             workers: self.scheduler.workers_on(id),
             elapsed_seconds: elapsed,
             rate,
@@ -441,13 +543,16 @@ impl Farm {
         self.jobs.keys().filter_map(|&id| self.status(id)).collect()
     }
 
+    /// Jobs that hold their sum in memory (those that may still receive results).
+    pub fn sums_in_memory(&self) -> usize {
+        self.jobs.values().filter(|j| j.sum.is_some()).count()
+    }
+
     /// The path of a job's latest checkpoint image.
     pub fn image(&self, id: u64, ext: &str) -> Result<std::path::PathBuf, FarmError> {
-        if !self.jobs.contains_key(&id) {
-            return Err(FarmError::NoJob(id));
-        }
-        let path = self.store.image_path(id, ext);
-        if path.exists() {
+        let job = self.jobs.get(&id).ok_or(FarmError::NoJob(id))?;
+        let path = self.store.layout().image_path(id, ext);
+        if job.image_passes > 0 && path.exists() {
             Ok(path)
         } else {
             Err(FarmError::NoImage(id))
@@ -457,5 +562,210 @@ impl Farm {
     /// Whether a bundle hash belongs to a job (workers may only fetch those).
     pub fn knows_bundle(&self, hash: &str) -> bool {
         self.jobs.values().any(|j| j.bundle == hash)
+    }
+}
+
+fn entry_of(
+    row: &JobRow,
+    render: RenderSettings,
+    defines: Vec<(String, String)>,
+    sum: Option<JobSum>,
+) -> JobEntry {
+    JobEntry {
+        created_ms: row.created_ms,
+        render,
+        scene: row.scene.clone(),
+        bundle: row.bundle.clone(),
+        defines,
+        width: row.width,
+        height: row.height,
+        total: row.total,
+        sum,
+        image_passes: row.image_passes,
+        started: None,
+        finished: None,
+        done_at_start: 0,
+        batches_received: 0,
+        bytes_received: 0,
+    }
+}
+
+/// Render settings for the status of a job whose stored ones cannot be read.
+fn placeholder_render(row: &JobRow) -> RenderSettings {
+    serde_json::from_str(&row.render).unwrap_or(RenderSettings {
+        seed: 0,
+        method: Method::Path(photonfarm::integrator::path::PathSettings {
+            max_depth: None,
+            rr_depth: 5,
+        }),
+    })
+}
+
+/// Restores one job from its row and files, or says why it cannot be.
+fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored, String> {
+    let render: RenderSettings =
+        serde_json::from_str(&row.render).map_err(|e| format!("its settings are damaged: {e}"))?;
+    let settings: JobSettings =
+        serde_json::from_str(&row.settings).map_err(|e| format!("its settings are damaged: {e}"))?;
+    // Checked before anything is allocated: a job stored by an older version, or under
+    // larger limits, must not take the coordinator down at every start.
+    limits
+        .check_job(row.width, row.height, Some(row.total), &render)
+        .map_err(|e| e.to_string())?;
+    if row.total == 0 || row.window == 0 {
+        return Err("it has no passes".into());
+    }
+    let mut image_passes = row.image_passes;
+    if row.state.is_final() {
+        // Over: its sums stay on disk. Jobs stored before image_passes was recorded count
+        // their final image as whole.
+        if row.state == JobState::Done {
+            image_passes = row.total;
+        }
+        let mut entry = entry_of(row, render, settings.defines, None);
+        entry.image_passes = image_passes;
+        return Ok(Restored {
+            entry,
+            done: vec![(0, image_passes.min(row.total))],
+            next_start: row.next_start,
+            state: row.state,
+        });
+    }
+    let layout = store.layout().clone();
+    let prefix = layout
+        .load_prefix(row.id, row.width, row.height)
+        .map_err(|e| format!("its summed passes are damaged: {e}"))?;
+    if (prefix.width, prefix.height) != (row.width, row.height) {
+        return Err(format!(
+            "its stored sum is {}x{}, not {}x{}",
+            prefix.width, prefix.height, row.width, row.height
+        ));
+    }
+    let mut acc = Accumulator::new(prefix, row.window);
+    let mut done = vec![(0, acc.prefix_passes())];
+    let ranges = store.batch_ranges(row.id).map_err(|e| e.to_string())?;
+    for (start, end) in ranges {
+        // A damaged batch is dropped: its passes are simply rendered again.
+        let added = layout
+            .load_batch(row.id, start, end)
+            .and_then(|sum| {
+                acc.add(start, sum)
+                    .map_err(|e| StoreError::Corrupt(format!("batch {start}..{end}"), e.to_string()))
+            })
+            .map(|_| ());
+        match added {
+            Ok(()) => done.push((start, end)),
+            Err(e) => {
+                tracing::warn!(
+                    job = row.id,
+                    "dropping a damaged batch ({e}); its passes will be rendered again"
+                );
+                store
+                    .forget_batch(row.id, start, end)
+                    .map_err(|e| e.to_string())?;
+            }
+        }
+    }
+    let mut state = row.state;
+    if acc.prefix_passes() >= row.total {
+        // Every pass was stored but the coordinator stopped before finishing the job.
+        layout
+            .write_prefix(row.id, acc.prefix())
+            .and_then(|_| layout.write_images(row.id, acc.prefix()))
+            .map_err(|e| e.to_string())?;
+        store
+            .forget_merged(row.id, acc.prefix_passes())
+            .and_then(|_| store.set_image_passes(row.id, row.total))
+            .map_err(|e| e.to_string())?;
+        image_passes = row.total;
+        state = JobState::Done;
+    }
+    let sum = (!state.is_final()).then(|| Arc::new(Mutex::new(acc)));
+    let mut entry = entry_of(row, render, settings.defines, sum);
+    entry.image_passes = image_passes;
+    Ok(Restored {
+        entry,
+        done,
+        next_start: row.next_start,
+        state,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use photonfarm::film::FilmSum;
+    use photonfarm::integrator::path::PathSettings;
+
+    fn render() -> RenderSettings {
+        RenderSettings {
+            seed: 0,
+            method: Method::Path(PathSettings {
+                max_depth: None,
+                rr_depth: 5,
+            }),
+        }
+    }
+
+    #[test]
+    fn jobs_that_are_over_hold_no_sums_in_memory_even_after_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let config = FarmConfig {
+            limits: Limits::for_memory(1 << 30),
+            ..FarmConfig::default()
+        };
+        let mut farm = Farm::open(Store::open(dir.path()).unwrap(), config).unwrap();
+        let settings = JobSettings {
+            passes: Some(1),
+            ..JobSettings::default()
+        };
+        let empty = || Accumulator::new(FilmSum::new(4, 4), 1);
+        let done = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", empty())
+            .unwrap();
+        let cancelled = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", empty())
+            .unwrap();
+        let running = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", empty())
+            .unwrap();
+        assert_eq!(farm.sums_in_memory(), 3);
+
+        // Render the first job: one result, its final image, and its sum leaves memory.
+        let req = LeaseRequest {
+            worker: "w".into(),
+            threads: 1,
+        };
+        let lease = farm.lease(&req).unwrap().unwrap();
+        assert_eq!(lease.job_id, done);
+        assert!(matches!(
+            farm.commit(lease.lease_id, "not the key", 1),
+            Err(FarmError::NotYours(_))
+        ));
+        let c = farm.commit(lease.lease_id, &lease.key, 1).unwrap();
+        let mut part = FilmSum::new(4, 4);
+        part.passes = 1;
+        let mut acc = c.sum.lock().unwrap();
+        acc.add(0, part).unwrap();
+        let layout = farm.layout();
+        layout.write_prefix(done, acc.prefix()).unwrap();
+        layout.write_images(done, acc.prefix()).unwrap();
+        drop(acc);
+        assert_eq!(
+            farm.status(done).unwrap().state,
+            JobState::Running,
+            "no image yet"
+        );
+        farm.checkpointed(done, 1, Some(1)).unwrap();
+        assert_eq!(farm.status(done).unwrap().state, JobState::Done);
+        farm.cancel(cancelled).unwrap();
+        assert_eq!(farm.sums_in_memory(), 1);
+
+        drop(farm);
+        let farm = Farm::open(Store::open(dir.path()).unwrap(), config).unwrap();
+        assert_eq!(farm.sums_in_memory(), 1, "only the running job's");
+        assert_eq!(farm.status(done).unwrap().state, JobState::Done);
+        assert_eq!(farm.status(done).unwrap().checkpoint_iterations, 1);
+        assert_eq!(farm.status(running).unwrap().state, JobState::Queued);
     }
 }

@@ -4,9 +4,11 @@
 #![warn(missing_docs)]
 
 pub mod accumulator;
+pub mod admission;
 pub mod api;
 pub mod cli;
 pub mod client;
+pub mod connections;
 pub mod converge;
 pub mod farm;
 pub mod progress;

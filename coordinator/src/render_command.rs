@@ -35,6 +35,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         eprintln!("warning: {w}");
     }
     let resolved = settings.resolve(&scene, args.time_limit.is_some())?;
+    // Before anything the size of the film or the photon count is allocated.
+    args.limits
+        .limits()
+        .check_job(scene.width(), scene.height(), resolved.passes, &resolved.render)?;
     for w in &resolved.warnings {
         eprintln!("warning: {w}");
     }

@@ -10,7 +10,10 @@
 //!   range goes back to the job and is handed out again before new passes.
 //! - A result counts only for a live lease, once: the lease is gone after it.
 //! - A worker that failed a range twice never gets that range again; a range that failed on
-//!   three workers fails the job.
+//!   three workers fails the job. A lease that expires (its worker crashed or hung) counts as
+//!   a failure of its worker, so a batch that kills every worker fails its job instead of
+//!   being handed out forever; and a range that every worker seen lately is barred from fails
+//!   the job with a message instead of waiting for a worker that may never come.
 //! - Batch sizes aim at a target duration from each worker's measured rate on the job.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -131,6 +134,8 @@ struct JobSched {
     message: Option<String>,
     /// (range start, worker) → failures.
     failures: HashMap<(u64, String), u32>,
+    /// The latest failure's message, for the job's message if it fails.
+    last_error: Option<String>,
     /// Passes per millisecond, per worker, from its finished batches.
     rates: HashMap<String, f64>,
 }
@@ -142,6 +147,9 @@ pub struct Scheduler {
     jobs: BTreeMap<u64, JobSched>,
     leases: BTreeMap<u64, LeaseInfo>,
     next_lease: u64,
+    /// Workers that asked for work, with the time they last asked: the farm's workers as far
+    /// as the scheduler can know them.
+    seen: HashMap<String, Millis>,
 }
 
 /// Failures of one range on one worker before that worker is no longer given it.
@@ -158,6 +166,7 @@ impl Scheduler {
             jobs: BTreeMap::new(),
             leases: BTreeMap::new(),
             next_lease: first_lease_id,
+            seen: HashMap::new(),
         }
     }
 
@@ -202,6 +211,7 @@ impl Scheduler {
                 state,
                 message: None,
                 failures: HashMap::new(),
+                last_error: None,
                 rates: HashMap::new(),
             },
         );
@@ -210,12 +220,17 @@ impl Scheduler {
     /// Grants the next batch to `worker`, from the oldest job with work it may take.
     pub fn lease(&mut self, worker: &str, now: Millis) -> Option<Grant> {
         let config = self.config;
+        self.seen.insert(worker.to_string(), now);
+        // Workers that asked within two lease timeouts count as present.
+        let recent = now.saturating_sub(config.lease_timeout_ms.saturating_mul(2));
+        self.seen.retain(|_, &mut t| t >= recent);
         for (&job_id, job) in self.jobs.iter_mut() {
             if job.state.is_final() {
                 continue;
             }
             let size = batch_size(&config, job.rates.get(worker).copied());
             let Some(range) = take_free(job, worker, size).or_else(|| take_new(job, size)) else {
+                fail_if_barred_everywhere(job, self.seen.keys());
                 continue;
             };
             let lease_id = self.next_lease;
@@ -303,6 +318,7 @@ impl Scheduler {
         let job = self.jobs.get_mut(&lease.job).expect("a lease's job exists");
         job.free.insert((lease.start, lease.end));
         if let Some(error) = error {
+            job.last_error = Some(error.to_string());
             *job.failures
                 .entry((lease.start, lease.worker.clone()))
                 .or_default() += 1;
@@ -319,6 +335,7 @@ impl Scheduler {
     }
 
     /// Ends every lease whose deadline has passed; returns them (lease id, job id).
+    /// A lease that expires counts as a failure of its worker (see the module's rules).
     pub fn expire(&mut self, now: Millis) -> Vec<(u64, u64)> {
         let expired: Vec<u64> = self
             .leases
@@ -330,7 +347,11 @@ impl Scheduler {
             .into_iter()
             .map(|id| {
                 let job = self.leases[&id].job;
-                self.release(id, None).expect("listed above");
+                self.release(
+                    id,
+                    Some("the lease expired without a heartbeat (the worker crashed, hung or lost the network)"),
+                )
+                .expect("listed above");
                 (id, job)
             })
             .collect()
@@ -366,6 +387,20 @@ impl Scheduler {
         self.jobs
             .get(&job_id)
             .map(|j| (j.state, j.completed, j.total, j.message.clone()))
+    }
+
+    /// Fails a job with a message (one that cannot be resumed).
+    pub fn set_failed(&mut self, job_id: u64, message: String) {
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            job.state = JobState::Failed;
+            job.message = Some(message);
+        }
+        self.leases.retain(|_, l| l.job != job_id);
+    }
+
+    /// Whether a lease is still held (granted, and neither completed, released nor expired).
+    pub fn is_live(&self, lease_id: u64) -> bool {
+        self.leases.contains_key(&lease_id)
     }
 
     /// The first pass never handed out (persisted, so a restart knows what to re-issue).
@@ -416,6 +451,28 @@ fn take_free(job: &mut JobSched, worker: &str, size: u64) -> Option<(u64, u64)> 
         job.free.insert((cut, e));
     }
     Some((s, cut))
+}
+
+/// Fails the job when a free range is barred to every worker present (each failed it too
+/// often): nobody will ever render it.
+fn fail_if_barred_everywhere<'a>(job: &mut JobSched, workers: impl Iterator<Item = &'a String> + Clone) {
+    let barred =
+        |s: u64, w: &String| job.failures.get(&(s, w.clone())).copied().unwrap_or(0) >= FAILURES_PER_WORKER;
+    let stuck = job
+        .free
+        .iter()
+        .find(|&&(s, _)| workers.clone().all(|w| barred(s, w)))
+        .copied();
+    if let Some((s, e)) = stuck {
+        let mut names: Vec<&String> = workers.collect();
+        names.sort();
+        job.state = JobState::Failed;
+        job.message = Some(format!(
+            "passes {s}..{e} failed on every available worker ({}); no worker may take them; last error: {}",
+            names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "),
+            job.last_error.as_deref().unwrap_or("none")
+        ));
+    }
 }
 
 /// New passes from the counter, up to `size`, never crossing a window boundary.
@@ -532,6 +589,35 @@ mod tests {
             s.release(g.lease_id, None).unwrap();
         }
         assert_eq!(s.status(2).unwrap().0, JobState::Running);
+    }
+
+    #[test]
+    fn crashing_workers_fail_the_job_and_a_barred_job_fails_with_a_message() {
+        // Three workers each take the batch and die (no heartbeat): the job fails.
+        let mut s = sched();
+        s.add_job(1, 10, 10, 0, &[], JobState::Queued);
+        let mut t = 0;
+        for w in ["a", "b", "c"] {
+            let g = s.lease(w, t).unwrap();
+            assert_eq!(g.start, 0);
+            t += 1001;
+            assert_eq!(s.expire(t).len(), 1);
+        }
+        let (state, _, _, msg) = s.status(1).unwrap();
+        assert_eq!(state, JobState::Failed);
+        assert!(msg.unwrap().contains("expired"));
+
+        // One worker, failing twice: nobody else will ever take the range.
+        let mut s = sched();
+        s.add_job(2, 1, 1, 0, &[], JobState::Queued);
+        for _ in 0..2 {
+            let g = s.lease("only", 0).unwrap();
+            s.release(g.lease_id, Some("out of memory")).unwrap();
+        }
+        assert!(s.lease("only", 1).is_none());
+        let (state, _, _, msg) = s.status(2).unwrap();
+        assert_eq!(state, JobState::Failed);
+        assert!(msg.unwrap().contains("every available worker (only)"));
     }
 
     #[test]

@@ -2,10 +2,46 @@
 
 use anyhow::{Context, bail};
 
+use crate::admission::Admission;
+use crate::api::Tokens;
 use crate::cli::ServeArgs;
 use crate::farm::FarmConfig;
 use crate::scheduler::SchedulerConfig;
 use crate::service::{ServeConfig, run as serve};
+
+/// The limits: this machine's defaults, overridden by the flags.
+fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
+    let mut a = Admission::for_this_machine();
+    fn mib(v: u64) -> u64 {
+        v.saturating_mul(1 << 20)
+    }
+    a.max_upload = mib(args.max_upload_mb);
+    a.job.max_pixels = args.max_pixels.unwrap_or(a.job.max_pixels);
+    a.job.max_passes = args.max_passes.unwrap_or(a.job.max_passes);
+    a.job.max_photons = args.max_photons.unwrap_or(a.job.max_photons);
+    a.max_geometry = args.max_geometry_mb.map_or(a.max_geometry, mib);
+    a.bundle.max_files = args.max_bundle_files;
+    a.bundle.max_bytes = args.max_bundle_mb.map_or(a.bundle.max_bytes, mib);
+    a.max_uploads = args.max_uploads;
+    a.max_connections = args.max_connections;
+    a.idle_timeout_s = args.idle_timeout;
+    a.header_timeout_s = args.header_timeout;
+    let zero = [
+        ("--max-pixels", a.job.max_pixels),
+        ("--max-passes", a.job.max_passes),
+        ("--max-photons", a.job.max_photons),
+        ("--max-bundle-files", a.bundle.max_files as u64),
+        ("--max-bundle-mb", a.bundle.max_bytes),
+        ("--max-uploads", a.max_uploads as u64),
+        ("--max-connections", a.max_connections as u64),
+        ("--idle-timeout", a.idle_timeout_s),
+        ("--header-timeout", a.header_timeout_s),
+    ];
+    if let Some((flag, _)) = zero.iter().find(|(_, v)| *v == 0) {
+        bail!("{flag} must be at least 1");
+    }
+    Ok(a)
+}
 
 /// Runs the service until ctrl-c or SIGTERM.
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
@@ -18,16 +54,23 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     if args.max_upload_mb == 0 || args.checkpoint_every == 0 {
         bail!("--max-upload-mb and --checkpoint-every must be at least 1");
     }
+    let admission = admission_of(&args)?;
     photonfarm::process::init_logging();
     // An empty PHOTONFARM_TOKEN (as docker compose passes an unset variable) means no token.
-    let token = args.token.clone().filter(|t| !t.is_empty());
-    if token.is_none() {
+    let client = args.token.clone().filter(|t| !t.is_empty());
+    let worker = args
+        .worker_token
+        .clone()
+        .filter(|t| !t.is_empty())
+        .or_else(|| client.clone());
+    if client.is_none() || worker.is_none() {
         tracing::warn!("no token configured: anyone who can reach this address can use the service");
     }
+    tracing::info!(?admission, "limits");
     let config = ServeConfig {
         data: args.data.clone(),
-        token,
-        max_upload: args.max_upload_mb << 20,
+        tokens: Tokens { client, worker },
+        admission,
         farm: FarmConfig {
             scheduler: SchedulerConfig {
                 lease_timeout_ms: (args.lease_timeout * 1000.0) as u64,
@@ -35,6 +78,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
                 ..SchedulerConfig::default()
             },
             default_checkpoint: args.checkpoint_every,
+            limits: admission.job,
         },
     };
     let rt = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;

@@ -9,8 +9,11 @@ use std::sync::atomic::AtomicU64;
 use std::time::Duration;
 
 use tokio::net::TcpListener;
+use tokio::sync::Semaphore;
 
-use crate::api::{AppState, router};
+use crate::admission::Admission;
+use crate::api::{AppState, Tokens, router};
+use crate::connections::BoundedListener;
 use crate::farm::{Farm, FarmConfig};
 use crate::store::Store;
 
@@ -19,10 +22,10 @@ use crate::store::Store;
 pub struct ServeConfig {
     /// Data folder (SQLite database, bundles, images).
     pub data: PathBuf,
-    /// Bearer token required of every request, if any.
-    pub token: Option<String>,
-    /// Largest upload, bytes.
-    pub max_upload: usize,
+    /// Bearer tokens of users and workers.
+    pub tokens: Tokens,
+    /// Limits on every request (the job limits also go to the farm, for jobs it reloads).
+    pub admission: Admission,
     /// Scheduling.
     pub farm: FarmConfig,
 }
@@ -40,11 +43,15 @@ pub async fn run(
         Ok(Farm::open(store, farm_config)?)
     })
     .await??;
+    let admission = config.admission;
     let state = Arc::new(AppState {
+        layout: farm.layout(),
         farm: std::sync::Mutex::new(farm),
-        token: config.token.clone(),
-        max_upload: config.max_upload,
+        tokens: config.tokens.clone(),
+        admission,
         uploads: AtomicU64::new(0),
+        upload_slots: Semaphore::new(admission.max_uploads.max(1)),
+        scene_checks: Semaphore::new(admission.max_scene_checks.max(1)),
     });
     // Leases without heartbeats expire; check several times per timeout.
     let period = Duration::from_millis((config.farm.scheduler.lease_timeout_ms / 10).clamp(10, 1000));
@@ -64,12 +71,27 @@ pub async fn run(
         }
     });
     let addr = listener.local_addr()?;
-    tracing::info!(%addr, data = %config.data.display(), auth = config.token.is_some(), "serving");
+    tracing::info!(
+        %addr,
+        data = %config.data.display(),
+        client_auth = config.tokens.client.is_some(),
+        worker_auth = config.tokens.worker.is_some(),
+        "serving"
+    );
     // On standard output, for scripts (and tests) that bind port 0.
     println!("listening on http://{addr}");
-    axum::serve(listener, router(state))
-        .with_graceful_shutdown(shutdown)
-        .await?;
+    let listener = BoundedListener::new(
+        listener,
+        admission.max_connections,
+        Duration::from_secs(admission.idle_timeout_s.max(1)),
+        Duration::from_secs(admission.header_timeout_s.max(1)),
+    );
+    axum::serve(
+        listener,
+        router(state).into_make_service_with_connect_info::<crate::connections::Busy>(),
+    )
+    .with_graceful_shutdown(shutdown)
+    .await?;
     expiry.abort();
     Ok(())
 }

@@ -11,6 +11,11 @@
 //! jobs/ID/batch-S-E.bin       results of passes [S, E) not yet merged into the prefix
 //! jobs/ID/image.exr, .png     the latest checkpoint
 //! ```
+//!
+//! Job ids are never reused, even if the database is lost or replaced by an older copy: a new
+//! id is above every id in the database *and* every folder under `jobs/`, so a fresh job can
+//! never be served an old job's files. Slow file work (fsync, image encoding) goes through
+//! [`Layout`], which needs no database and so runs outside the farm's lock.
 
 use std::path::{Path, PathBuf};
 
@@ -63,12 +68,23 @@ pub struct JobRow {
     pub width: u32,
     /// Image size.
     pub height: u32,
+    /// Passes in the latest checkpoint image.
+    pub image_passes: u64,
+}
+
+/// Where everything lives under the data folder: paths only, so it is cheap to clone and
+/// usable without the farm's lock.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    dir: PathBuf,
 }
 
 /// The data folder.
 pub struct Store {
-    dir: PathBuf,
+    layout: Layout,
     db: Connection,
+    /// Above every job folder found at start: new ids start past it.
+    id_floor: u64,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
@@ -77,10 +93,16 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
 
 /// Writes `bytes` to `path` atomically and durably.
 pub fn write_durably(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
+    write_durably_as(path, bytes, 0)
+}
+
+/// [`write_durably`] through a temporary file named with `tag`, so that concurrent writers
+/// of one path never share a temporary file.
+fn write_durably_as(path: &Path, bytes: &[u8], tag: u64) -> Result<(), StoreError> {
     use std::io::Write;
     let dir = path.parent().expect("stored files live in a folder");
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let tmp = path.with_extension("tmp");
+    let tmp = path.with_extension(format!("tmp{tag}"));
     let mut f = std::fs::File::create(&tmp).map_err(io(&tmp))?;
     f.write_all(bytes).map_err(io(&tmp))?;
     f.sync_all().map_err(io(&tmp))?;
@@ -89,6 +111,89 @@ pub fn write_durably(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+impl Layout {
+    /// Where a bundle's archive is kept.
+    pub fn bundle_archive(&self, hash: &str) -> PathBuf {
+        self.dir.join("bundles").join(format!("{hash}.tar"))
+    }
+
+    /// Where a bundle is unpacked.
+    pub fn bundle_dir(&self, hash: &str) -> PathBuf {
+        self.dir.join("bundles").join(hash)
+    }
+
+    /// A scratch folder inside the data folder (same file system, so renames work).
+    pub fn scratch_dir(&self, name: &str) -> PathBuf {
+        self.dir.join("bundles").join(format!("incoming-{name}"))
+    }
+
+    /// A job's folder.
+    pub fn job_dir(&self, id: u64) -> PathBuf {
+        self.dir.join("jobs").join(id.to_string())
+    }
+
+    /// Where a job's latest checkpoint image is.
+    pub fn image_path(&self, id: u64, ext: &str) -> PathBuf {
+        self.job_dir(id).join(format!("image.{ext}"))
+    }
+
+    /// Where the result of passes [start, end) is kept until merged.
+    pub fn batch_path(&self, job: u64, start: u64, end: u64) -> PathBuf {
+        self.job_dir(job).join(format!("batch-{start}-{end}.bin"))
+    }
+
+    /// Stores an encoded batch result of passes [start, end) durably (before its row is
+    /// recorded under the lock). `tag` makes the temporary name unique among concurrent
+    /// writers of the same range.
+    pub fn write_batch_bytes(
+        &self,
+        job: u64,
+        start: u64,
+        end: u64,
+        encoded: &[u8],
+        tag: u64,
+    ) -> Result<(), StoreError> {
+        write_durably_as(&self.batch_path(job, start, end), encoded, tag)
+    }
+
+    /// Stores a job's prefix (passes [0, N) summed) durably.
+    pub fn write_prefix(&self, job: u64, prefix: &FilmSum) -> Result<(), StoreError> {
+        write_durably(&self.job_dir(job).join("prefix.bin"), &encode_batch(prefix))
+    }
+
+    /// Writes the checkpoint images (EXR and PNG) atomically.
+    pub fn write_images(&self, job: u64, sum: &FilmSum) -> Result<(), StoreError> {
+        for ext in ["exr", "png"] {
+            let path = self.image_path(job, ext);
+            let tmp = self.job_dir(job).join(format!("image-tmp.{ext}"));
+            std::fs::create_dir_all(self.job_dir(job)).map_err(io(&tmp))?;
+            sum.write(&tmp).map_err(|e| {
+                StoreError::Io(tmp.display().to_string(), std::io::Error::other(e.to_string()))
+            })?;
+            std::fs::rename(&tmp, &path).map_err(io(&path))?;
+        }
+        Ok(())
+    }
+
+    /// The stored prefix, or an empty one.
+    pub fn load_prefix(&self, job: u64, width: u32, height: u32) -> Result<FilmSum, StoreError> {
+        let path = self.job_dir(job).join("prefix.bin");
+        match std::fs::read(&path) {
+            Ok(bytes) => decode_batch(&bytes)
+                .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string())),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(FilmSum::new(width, height)),
+            Err(e) => Err(StoreError::Io(path.display().to_string(), e)),
+        }
+    }
+
+    /// Reads one stored batch result.
+    pub fn load_batch(&self, job: u64, start: u64, end: u64) -> Result<FilmSum, StoreError> {
+        let path = self.batch_path(job, start, end);
+        let bytes = std::fs::read(&path).map_err(io(&path))?;
+        decode_batch(&bytes).map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))
+    }
 }
 
 impl Store {
@@ -110,10 +215,29 @@ impl Store {
                  job INTEGER NOT NULL, start INTEGER NOT NULL, end INTEGER NOT NULL,
                  PRIMARY KEY (job, start));",
         )?;
+        // Passes in each job's latest image (added after the first release; an error means
+        // the column is there already).
+        let _ = db.execute(
+            "ALTER TABLE jobs ADD COLUMN image_passes INTEGER NOT NULL DEFAULT 0",
+            [],
+        );
+        let id_floor = std::fs::read_dir(dir.join("jobs"))
+            .map_err(io(dir))?
+            .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u64>().ok())
+            .max()
+            .unwrap_or(0);
         Ok(Store {
-            dir: dir.to_path_buf(),
+            layout: Layout {
+                dir: dir.to_path_buf(),
+            },
             db,
+            id_floor,
         })
+    }
+
+    /// The paths, for work outside the farm's lock.
+    pub fn layout(&self) -> &Layout {
+        &self.layout
     }
 
     /// Reserves a fresh range of lease ids for this run: ids from an earlier run can never be
@@ -134,30 +258,6 @@ impl Store {
         Ok(base)
     }
 
-    /// Where a bundle's archive is kept.
-    pub fn bundle_archive(&self, hash: &str) -> PathBuf {
-        self.dir.join("bundles").join(format!("{hash}.tar"))
-    }
-
-    /// Where a bundle is unpacked.
-    pub fn bundle_dir(&self, hash: &str) -> PathBuf {
-        self.dir.join("bundles").join(hash)
-    }
-
-    /// A scratch folder inside the data folder (same file system, so renames work).
-    pub fn scratch_dir(&self, name: &str) -> PathBuf {
-        self.dir.join("bundles").join(format!("incoming-{name}"))
-    }
-
-    fn job_dir(&self, id: u64) -> PathBuf {
-        self.dir.join("jobs").join(id.to_string())
-    }
-
-    /// Where a job's latest checkpoint image is.
-    pub fn image_path(&self, id: u64, ext: &str) -> PathBuf {
-        self.job_dir(id).join(format!("image.{ext}"))
-    }
-
     /// Inserts a new job; returns its id.
     #[allow(clippy::too_many_arguments)]
     pub fn insert_job(
@@ -172,10 +272,14 @@ impl Store {
         width: u32,
         height: u32,
     ) -> Result<u64, StoreError> {
+        let in_db: i64 = self
+            .db
+            .query_row("SELECT COALESCE(MAX(id), 0) FROM jobs", [], |r| r.get(0))?;
+        let id = (in_db as u64).max(self.id_floor) + 1;
         self.db.execute(
-            "INSERT INTO jobs (created_ms, settings, render, scene, bundle, total, window, next_start, state,
+            "INSERT INTO jobs (id, created_ms, settings, render, scene, bundle, total, window, next_start, state,
                                width, height)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, 0, 'queued', ?8, ?9)",
+             VALUES (?10, ?1, ?2, ?3, ?4, ?5, ?6, ?7, 0, 'queued', ?8, ?9)",
             params![
                 created_ms as i64,
                 settings,
@@ -185,10 +289,11 @@ impl Store {
                 total as i64,
                 window as i64,
                 width,
-                height
+                height,
+                id as i64
             ],
         )?;
-        Ok(self.db.last_insert_rowid() as u64)
+        Ok(id)
     }
 
     /// Records how far the counter went and the state.
@@ -206,11 +311,20 @@ impl Store {
         Ok(())
     }
 
+    /// Records the pass count of a job's latest image.
+    pub fn set_image_passes(&mut self, id: u64, passes: u64) -> Result<(), StoreError> {
+        self.db.execute(
+            "UPDATE jobs SET image_passes = ?2 WHERE id = ?1",
+            params![id as i64, passes as i64],
+        )?;
+        Ok(())
+    }
+
     /// Every job, oldest first.
     pub fn load_jobs(&self) -> Result<Vec<JobRow>, StoreError> {
         let mut stmt = self.db.prepare(
             "SELECT id, created_ms, settings, render, scene, bundle, total, window, next_start, state, message,
-                    width, height FROM jobs ORDER BY id",
+                    width, height, image_passes FROM jobs ORDER BY id",
         )?;
         let rows = stmt.query_map([], |r| {
             Ok(JobRow {
@@ -227,18 +341,14 @@ impl Store {
                 message: r.get(10)?,
                 width: r.get(11)?,
                 height: r.get(12)?,
+                image_passes: r.get::<_, i64>(13)? as u64,
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)
     }
 
-    /// Stores a batch result durably (file first, then its row).
-    pub fn save_batch(&mut self, job: u64, start: u64, sum: &FilmSum) -> Result<(), StoreError> {
-        let end = start + sum.passes;
-        write_durably(
-            &self.job_dir(job).join(format!("batch-{start}-{end}.bin")),
-            &encode_batch(sum),
-        )?;
+    /// Records a batch result whose file [`Layout::write_batch`] has stored.
+    pub fn record_batch(&mut self, job: u64, start: u64, end: u64) -> Result<(), StoreError> {
         self.db.execute(
             "INSERT OR REPLACE INTO batches (job, start, end) VALUES (?1, ?2, ?3)",
             params![job as i64, start as i64, end as i64],
@@ -246,71 +356,38 @@ impl Store {
         Ok(())
     }
 
-    /// Batch results stored for a job and not yet merged into its prefix.
-    pub fn load_batches(&self, job: u64) -> Result<Vec<(u64, FilmSum)>, StoreError> {
+    /// Ranges of the batch results stored for a job and not yet merged into its prefix.
+    pub fn batch_ranges(&self, job: u64) -> Result<Vec<(u64, u64)>, StoreError> {
         let mut stmt = self
             .db
             .prepare("SELECT start, end FROM batches WHERE job = ?1 ORDER BY start")?;
-        let ranges: Vec<(u64, u64)> = stmt
+        let ranges = stmt
             .query_map(params![job as i64], |r| {
                 Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u64))
             })?
             .collect::<Result<_, _>>()?;
-        ranges
-            .into_iter()
-            .map(|(s, e)| {
-                let path = self.job_dir(job).join(format!("batch-{s}-{e}.bin"));
-                let bytes = std::fs::read(&path).map_err(io(&path))?;
-                let sum = decode_batch(&bytes)
-                    .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))?;
-                Ok((s, sum))
-            })
-            .collect()
+        Ok(ranges)
     }
 
-    /// Stores the prefix durably, then forgets the batches it contains.
-    pub fn save_prefix(&mut self, job: u64, prefix: &FilmSum) -> Result<(), StoreError> {
-        write_durably(&self.job_dir(job).join("prefix.bin"), &encode_batch(prefix))?;
-        let merged: Vec<(u64, u64)> = {
-            let mut stmt = self
-                .db
-                .prepare("SELECT start, end FROM batches WHERE job = ?1 AND end <= ?2")?;
-            stmt.query_map(params![job as i64, prefix.passes as i64], |r| {
-                Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u64))
-            })?
-            .collect::<Result<_, _>>()?
-        };
+    /// Forgets a batch (merged into a stored prefix, or found damaged) and removes its file.
+    pub fn forget_batch(&mut self, job: u64, start: u64, end: u64) -> Result<(), StoreError> {
         self.db.execute(
-            "DELETE FROM batches WHERE job = ?1 AND end <= ?2",
-            params![job as i64, prefix.passes as i64],
+            "DELETE FROM batches WHERE job = ?1 AND start = ?2 AND end = ?3",
+            params![job as i64, start as i64, end as i64],
         )?;
-        for (s, e) in merged {
-            let _ = std::fs::remove_file(self.job_dir(job).join(format!("batch-{s}-{e}.bin")));
-        }
+        let _ = std::fs::remove_file(self.layout.batch_path(job, start, end));
         Ok(())
     }
 
-    /// The stored prefix, or an empty one.
-    pub fn load_prefix(&self, job: u64, width: u32, height: u32) -> Result<FilmSum, StoreError> {
-        let path = self.job_dir(job).join("prefix.bin");
-        match std::fs::read(&path) {
-            Ok(bytes) => decode_batch(&bytes)
-                .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string())),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(FilmSum::new(width, height)),
-            Err(e) => Err(StoreError::Io(path.display().to_string(), e)),
-        }
-    }
-
-    /// Writes the checkpoint images (EXR and PNG) atomically.
-    pub fn write_images(&self, job: u64, sum: &FilmSum) -> Result<(), StoreError> {
-        for ext in ["exr", "png"] {
-            let path = self.image_path(job, ext);
-            let tmp = self.job_dir(job).join(format!("image-tmp.{ext}"));
-            std::fs::create_dir_all(self.job_dir(job)).map_err(io(&tmp))?;
-            sum.write(&tmp).map_err(|e| {
-                StoreError::Io(tmp.display().to_string(), std::io::Error::other(e.to_string()))
-            })?;
-            std::fs::rename(&tmp, &path).map_err(io(&path))?;
+    /// Forgets the batches a stored prefix of `passes` passes contains.
+    pub fn forget_merged(&mut self, job: u64, passes: u64) -> Result<(), StoreError> {
+        let merged: Vec<(u64, u64)> = self
+            .batch_ranges(job)?
+            .into_iter()
+            .filter(|&(_, e)| e <= passes)
+            .collect();
+        for (s, e) in merged {
+            self.forget_batch(job, s, e)?;
         }
         Ok(())
     }

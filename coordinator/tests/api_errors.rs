@@ -109,10 +109,22 @@ impl Api {
     }
 
     async fn call(&self, method: reqwest::Method, path: &str, body: Vec<u8>) -> (StatusCode, Value) {
+        self.call_keyed(method, path, body, "").await
+    }
+
+    /// A call carrying a lease's secret.
+    async fn call_keyed(
+        &self,
+        method: reqwest::Method,
+        path: &str,
+        body: Vec<u8>,
+        key: &str,
+    ) -> (StatusCode, Value) {
         let resp = self
             .http
             .request(method, format!("{}{path}", self.url))
             .bearer_auth(TOKEN)
+            .header("x-photonfarm-lease-key", key)
             .body(body)
             .send()
             .await
@@ -181,6 +193,10 @@ async fn bad_requests_get_the_right_4xx_and_the_service_keeps_serving() {
         .await;
     assert_eq!(s, StatusCode::UNPROCESSABLE_ENTITY);
     assert!(error_of(&v).contains("not found"), "{v}");
+    assert!(
+        !error_of(&v).contains(dir.path().to_str().unwrap()),
+        "the coordinator's paths leak: {v}"
+    );
 
     // Path traversal in the bundle.
     let (s, v) = api
@@ -254,6 +270,20 @@ async fn bad_requests_get_the_right_4xx_and_the_service_keeps_serving() {
             reqwest::Method::PUT,
             &format!("/api/leases/{lease_id}/result"),
             b"garbage".to_vec(),
+        )
+        .await;
+    assert_eq!(
+        s,
+        StatusCode::FORBIDDEN,
+        "only the lease's worker may complete it: {v}"
+    );
+    let key = lease["key"].as_str().unwrap();
+    let (s, v) = api
+        .call_keyed(
+            reqwest::Method::PUT,
+            &format!("/api/leases/{lease_id}/result"),
+            b"garbage".to_vec(),
+            key,
         )
         .await;
     assert_eq!(s, StatusCode::BAD_REQUEST);

@@ -220,3 +220,55 @@ fn bad_sppm_parameters_fail_clearly() {
         "{err}"
     );
 }
+
+/// Issue 11: sizes that used to abort `coordinator render` (a 103 GB film, a stack overflow on
+/// deep XML, a radius schedule of 8 TB) are clear errors with exit status 1.
+#[test]
+fn oversized_jobs_are_clear_errors_not_aborts() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: String| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let film = |w: u32| {
+        format!(
+            r#"<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm">
+            <integer name="width" value="{w}"/><integer name="height" value="{w}"/><rfilter type="box"/>
+            </film></sensor><emitter type="point"><point name="position" x="0" y="0" z="0"/></emitter></scene>"#
+        )
+    };
+    let huge = write("huge.xml", film(65536));
+    let small = write("small.xml", film(8));
+    let deep = write(
+        "deep.xml",
+        format!(
+            "<scene version=\"3.0.0\">{}{}</scene>",
+            "<shape>".repeat(5000),
+            "</shape>".repeat(5000)
+        ),
+    );
+    let out = dir.path().join("out.exr");
+    let out = out.to_str().unwrap();
+    for (scene, extra, needle) in [
+        (&huge, &[][..], "--max-pixels"),
+        (&deep, &[][..], "deeper than"),
+        (
+            &small,
+            &["--integrator", "sppm", "--iterations", "1000000000000"][..],
+            "--max-passes",
+        ),
+        (
+            &small,
+            &["--integrator", "sppm", "--photons", "1000000000000"][..],
+            "--max-photons",
+        ),
+    ] {
+        let mut args = vec!["render", scene.to_str().unwrap(), "--out", out];
+        args.extend_from_slice(extra);
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(err.contains(needle), "{err}");
+    }
+}

@@ -14,8 +14,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+use photonfarm::bundle::UnpackLimits;
 use photonfarm::film::FilmSum;
-use photonfarm::protocol::{Lease, LeaseRequest, Release, encode_batch};
+use photonfarm::limits::Limits;
+use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encode_batch};
 use photonfarm::render::render_batch;
 use photonfarm::scene::Scene;
 use tokio::sync::watch;
@@ -33,6 +35,9 @@ pub struct WorkerConfig {
     pub name: String,
     /// Bundle cache folder.
     pub cache: PathBuf,
+    /// The largest batch this worker agrees to render (a batch beyond them is released as a
+    /// failure, so a job too large for every worker fails instead of crashing them).
+    pub limits: Limits,
 }
 
 /// Scenes loaded from bundles, by (bundle, scene path, defines).
@@ -109,6 +114,7 @@ pub async fn run(
                     reqwest::Method::POST,
                     &format!("/api/leases/{}/release", lease.lease_id),
                 )
+                .header(LEASE_KEY_HEADER, &lease.key)
                 .json(&release)
                 .send()
                 .await;
@@ -147,6 +153,11 @@ async fn work_on(
     lease: Lease,
 ) -> anyhow::Result<()> {
     let scene = load_scene(client, config, scenes, &lease).await?;
+    // Before any allocation for the batch: the film and the photon buffers.
+    config
+        .limits
+        .check_job(scene.width(), scene.height(), None, &lease.settings)
+        .context("this worker refuses the batch")?;
     if !lease.radii.is_empty() && lease.radii.len() as u64 != lease.end - lease.start {
         bail!(
             "the lease carries {} radii for {} passes",
@@ -158,6 +169,7 @@ async fn work_on(
     let heartbeat = tokio::spawn(heartbeat_loop(
         client.clone(),
         lease.lease_id,
+        lease.key.clone(),
         lease.heartbeat_ms,
         lost.clone(),
     ));
@@ -198,6 +210,7 @@ async fn work_on(
             &format!("/api/leases/{}/result", lease.lease_id),
         )
         .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
+        .header(LEASE_KEY_HEADER, &lease.key)
         .body(encode_batch(&sum))
         .send()
         .await
@@ -225,18 +238,21 @@ async fn work_on(
     Ok(())
 }
 
-async fn heartbeat_loop(client: Arc<Client>, lease: u64, every_ms: u64, lost: Arc<AtomicBool>) {
+async fn heartbeat_loop(client: Arc<Client>, lease: u64, key: String, every_ms: u64, lost: Arc<AtomicBool>) {
     let mut tick = tokio::time::interval(Duration::from_millis(every_ms.max(10)));
     tick.tick().await;
     loop {
         tick.tick().await;
         match client
             .req(reqwest::Method::POST, &format!("/api/leases/{lease}/heartbeat"))
+            .header(LEASE_KEY_HEADER, &key)
             .send()
             .await
         {
             Ok(r)
-                if r.status() == reqwest::StatusCode::CONFLICT || r.status() == reqwest::StatusCode::GONE =>
+                if r.status() == reqwest::StatusCode::CONFLICT
+                    || r.status() == reqwest::StatusCode::GONE
+                    || r.status() == reqwest::StatusCode::FORBIDDEN =>
             {
                 lost.store(true, Ordering::Relaxed);
                 return;
@@ -246,6 +262,25 @@ async fn heartbeat_loop(client: Arc<Client>, lease: u64, every_ms: u64, lost: Ar
             _ => {}
         }
     }
+}
+
+/// Streams a bundle to `path` (never whole in memory); returns its SHA-256.
+async fn download(client: &Client, bundle: &str, path: &std::path::Path) -> anyhow::Result<String> {
+    use sha2::Digest;
+    use tokio::io::AsyncWriteExt;
+    let mut resp = client
+        .req(reqwest::Method::GET, &format!("/api/bundles/{bundle}"))
+        .send()
+        .await?
+        .error_for_status()?;
+    let mut file = tokio::fs::File::create(path).await?;
+    let mut hash = sha2::Sha256::new();
+    while let Some(chunk) = resp.chunk().await? {
+        hash.update(&chunk);
+        file.write_all(&chunk).await?;
+    }
+    file.flush().await?;
+    Ok(hex::encode(hash.finalize()))
 }
 
 async fn load_scene(
@@ -263,21 +298,26 @@ async fn load_scene(
     }
     let dir = config.cache.join(&lease.bundle);
     if !dir.exists() {
-        let bytes = client
-            .req(reqwest::Method::GET, &format!("/api/bundles/{}", lease.bundle))
-            .send()
-            .await?
-            .error_for_status()?
-            .bytes()
-            .await?;
-        if photonfarm::bundle::content_hash(&bytes) != lease.bundle {
+        let archive = config
+            .cache
+            .join(format!("{}.tar.partial-{}", lease.bundle, std::process::id()));
+        let hash = download(client, &lease.bundle, &archive).await?;
+        if hash != lease.bundle {
+            let _ = std::fs::remove_file(&archive);
             bail!("bundle {} arrived damaged (hash mismatch)", lease.bundle);
         }
         let tmp = config
             .cache
             .join(format!("{}.partial-{}", lease.bundle, std::process::id()));
         let _ = std::fs::remove_dir_all(&tmp);
-        photonfarm::bundle::unpack(&bytes, &tmp)?;
+        let unpacked = std::fs::File::open(&archive)
+            .map_err(anyhow::Error::from)
+            .and_then(|f| {
+                photonfarm::bundle::unpack_from(std::io::BufReader::new(f), &tmp, &UnpackLimits::default())
+                    .map_err(anyhow::Error::from)
+            });
+        let _ = std::fs::remove_file(&archive);
+        unpacked?;
         std::fs::rename(&tmp, &dir).or_else(|e| if dir.exists() { Ok(()) } else { Err(e) })?;
     }
     let path = dir.join(&lease.scene);

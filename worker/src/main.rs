@@ -25,6 +25,13 @@ struct Args {
     /// Folder for downloaded job bundles (default: a folder in the system's temporary folder).
     #[arg(long)]
     cache: Option<PathBuf>,
+    /// Largest film this worker renders, in pixels [default: memory / 512 B]; a larger batch
+    /// is released as a failure.
+    #[arg(long)]
+    max_pixels: Option<u64>,
+    /// Most SPPM photons per iteration this worker renders [default: memory / 256 B].
+    #[arg(long)]
+    max_photons: Option<u64>,
 }
 
 fn main() -> ExitCode {
@@ -44,6 +51,12 @@ fn main() -> ExitCode {
             .cache
             .unwrap_or_else(|| std::env::temp_dir().join(format!("photonfarm-worker-{name}"))),
         name,
+        limits: {
+            let mut l = photonfarm::limits::Limits::for_this_machine();
+            l.max_pixels = args.max_pixels.unwrap_or(l.max_pixels);
+            l.max_photons = args.max_photons.unwrap_or(l.max_photons);
+            l
+        },
     };
     if config.threads == 0 {
         eprintln!("error: --threads must be at least 1");

@@ -8,6 +8,13 @@ const BINS: usize = 16;
 const MAX_LEAF: usize = 4;
 /// Cost of a traversal step relative to one primitive test, for the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
+/// Depth below which the SAH chooses splits. Deeper, splits are by count (median), which
+/// halves the primitives at every level: with at most 2^32 primitives the tree's depth stays
+/// below `SAH_DEPTH + 32 = STACK`, so the traversal stack cannot overflow, whatever the
+/// geometry (the SAH alone peels one primitive per level off nested sizes in a progression).
+const SAH_DEPTH: usize = 32;
+/// Traversal stack entries: one per level of the deepest possible tree.
+const STACK: usize = SAH_DEPTH + 32;
 
 /// One node of the flattened tree. Interior nodes keep their first child right after them.
 #[derive(Clone, Copy, Debug)]
@@ -51,7 +58,7 @@ impl Bvh {
             .collect();
         let mut nodes = Vec::with_capacity(2 * prims.len().max(1));
         if !items.is_empty() {
-            build_node(&mut items, 0, &mut nodes);
+            build_node(&mut items, 0, 0, &mut nodes);
         }
         let mut slots: Vec<Option<Primitive>> = prims.into_iter().map(Some).collect();
         let prims = items
@@ -101,7 +108,7 @@ impl Bvh {
         }
         let inv_d = Vec3A::ONE / ray.d;
         let neg = [inv_d.x < 0.0, inv_d.y < 0.0, inv_d.z < 0.0];
-        let mut stack = [0u32; 64];
+        let mut stack = [0u32; STACK];
         let mut sp = 0usize;
         let mut current = 0u32;
         loop {
@@ -148,8 +155,9 @@ fn make_leaf(items: &[BuildItem], first: usize, bounds: Aabb) -> Node {
     }
 }
 
-/// Builds the subtree over `items` (which start at `first` in the final order); returns its index.
-fn build_node(items: &mut [BuildItem], first: usize, nodes: &mut Vec<Node>) -> usize {
+/// Builds the subtree over `items` (which start at `first` in the final order) at `depth`;
+/// returns its index.
+fn build_node(items: &mut [BuildItem], first: usize, depth: usize, nodes: &mut Vec<Node>) -> usize {
     let bounds = items.iter().fold(Aabb::EMPTY, |b, it| b.union(it.bounds));
     let index = nodes.len();
     if items.len() <= 1 {
@@ -165,7 +173,12 @@ fn build_node(items: &mut [BuildItem], first: usize, nodes: &mut Vec<Node>) -> u
     } else {
         2
     };
-    let mid = match sah_split(items, &centroids, axis, bounds) {
+    let sah = if depth < SAH_DEPTH {
+        sah_split(items, &centroids, axis, bounds)
+    } else {
+        None
+    };
+    let mid = match sah {
         Some(split) => split,
         None if items.len() <= MAX_LEAF => {
             nodes.push(make_leaf(items, first, bounds));
@@ -185,8 +198,8 @@ fn build_node(items: &mut [BuildItem], first: usize, nodes: &mut Vec<Node>) -> u
         axis: axis as u8,
     });
     let (left, right) = items.split_at_mut(mid);
-    build_node(left, first, nodes);
-    let second = build_node(right, first + mid, nodes);
+    build_node(left, first, depth + 1, nodes);
+    let second = build_node(right, first + mid, depth + 1, nodes);
     nodes[index].offset = second as u32;
     index
 }
@@ -262,6 +275,63 @@ mod tests {
                 })
             })
             .collect()
+    }
+
+    /// Depth of the deepest leaf.
+    fn depth(bvh: &Bvh, node: usize) -> usize {
+        let n = &bvh.nodes[node];
+        if n.count > 0 {
+            0
+        } else {
+            1 + depth(bvh, node + 1).max(depth(bvh, n.offset as usize))
+        }
+    }
+
+    /// Spheres shrinking geometrically towards the origin, placed on the x, y and z axes in
+    /// turn, each 17 times closer than the one before on its axis. At every level the widest
+    /// axis holds one sphere far out and everything else in the first of the 16 bins, so the
+    /// SAH can only peel one sphere off per level: unbounded, the tree is as deep as there
+    /// are spheres.
+    fn progression(n: usize) -> Vec<Primitive> {
+        let step = 17f32.powf(1.0 / 3.0);
+        (0..n)
+            .map(|i| {
+                let l = step.powi(-(i as i32));
+                let mut center = Vec3A::ZERO;
+                center[i % 3] = l;
+                Primitive::Sphere(Sphere {
+                    center,
+                    radius: 0.1 * l,
+                    shape: i as u32,
+                    flip: false,
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn nested_sizes_in_a_progression_cannot_overflow_the_traversal_stack() {
+        // 90 spheres: with the SAH alone the tree was 87 levels deep and a ray from the small
+        // end overflowed the old fixed stack of 64 entries (index out of bounds).
+        let prims = progression(90);
+        let bvh = Bvh::build(prims.clone());
+        let d = depth(&bvh, 0);
+        assert!(d < STACK, "depth {d}");
+        let mut s = Sampler::new(5, Stream::Camera, 0, 0);
+        for _ in 0..500 {
+            // From below the origin outwards: the near child is always the deeper subtree, so
+            // every level pushes one entry.
+            // Towards the origin, where the smallest spheres are, passing between them.
+            let target = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 1e-30;
+            let o = Vec3A::splat(-1.0);
+            let ray = Ray::new(o, (target - o).normalize());
+            let brute = prims
+                .iter()
+                .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| h.0))
+                .min_by(|a, b| a.total_cmp(b));
+            assert_eq!(brute, bvh.intersect(&ray, f32::INFINITY).map(|h| h.t));
+            assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
+        }
     }
 
     #[test]

@@ -12,6 +12,15 @@ use super::SceneError;
 /// Mitsuba's limit on nested includes (a cycle of includes stops here too).
 const MAX_INCLUDE_DEPTH: u32 = 15;
 
+/// Deepest element nesting accepted, counted across includes. Mitsuba scenes nest a handful of
+/// levels; the limit keeps the recursive reading below (and the builders after it) far from the
+/// stack's end, also on a worker's smaller thread stacks.
+pub(crate) const MAX_DEPTH: u32 = 100;
+
+/// Most bytes `$name` substitution may produce over a whole scene. Parameters may refer to
+/// parameters, so a 1 KB file could otherwise ask for gigabytes (an expansion bomb).
+pub(crate) const MAX_EXPANSION: usize = 16 << 20;
+
 /// One XML element, with what errors need to point at it.
 #[derive(Clone, Debug)]
 pub(crate) struct Element {
@@ -57,6 +66,7 @@ pub(crate) struct Parsed {
 /// which override the scene's `<default>`s.
 pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Result<Parsed, SceneError> {
     let mut reader = Reader {
+        budget: MAX_EXPANSION,
         params: defines.iter().cloned().collect(),
         used: defines.iter().map(|(k, _)| (k.clone(), false)).collect(),
         search_dirs: Vec::new(),
@@ -91,6 +101,8 @@ pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Re
 
 /// Parameters, folders and files gathered across the scene and its includes.
 struct Reader {
+    /// Bytes that `$name` substitution may still produce.
+    budget: usize,
     params: HashMap<String, String>,
     /// For each `-D` parameter, whether any `$name` used it.
     used: HashMap<String, bool>,
@@ -134,6 +146,12 @@ impl Reader {
                 ));
             }
         }
+        check_depth(&doc).map_err(|(line, message)| SceneError {
+            file: file.to_path_buf(),
+            line,
+            element: "XML".into(),
+            message,
+        })?;
         let ctx = FileCtx {
             doc: &doc,
             src,
@@ -254,6 +272,11 @@ impl Reader {
     /// Replaces every `$name` by its parameter's value, noting which `-D` parameters are used.
     fn substitute(&mut self, value: &str) -> Result<String, String> {
         let out = substitute(value, &self.params)?;
+        if out.len() > value.len() {
+            self.budget = self.budget.checked_sub(out.len() - value.len()).ok_or_else(|| {
+                format!("parameter substitution produces more than {MAX_EXPANSION} bytes (defaults that repeat defaults?)")
+            })?;
+        }
         if value.contains('$') {
             for (k, used) in self.used.iter_mut() {
                 if !*used && value.contains(&format!("${k}")) {
@@ -263,6 +286,29 @@ impl Reader {
         }
         Ok(out)
     }
+}
+
+/// Refuses nesting deeper than [`MAX_DEPTH`] in one file, without recursion (so before anything
+/// recurses); returns the line and message. Includes add their depth to the including
+/// element's, which [`MAX_INCLUDE_DEPTH`] bounds.
+fn check_depth(doc: &roxmltree::Document) -> Result<(), (u32, String)> {
+    // Descendants come in document order, so a node's parent is seen before it.
+    let mut depth: Vec<u32> = Vec::new();
+    for n in doc.descendants() {
+        let d = n.parent().map_or(0, |p| depth[p.id().get_usize()] + 1);
+        let i = n.id().get_usize();
+        if depth.len() <= i {
+            depth.resize(i + 1, 0);
+        }
+        depth[i] = d;
+        if d > MAX_DEPTH {
+            return Err((
+                doc.text_pos_at(n.range().start).row,
+                format!("elements nest deeper than {MAX_DEPTH} levels"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The file being read, for errors and relative paths.
@@ -314,7 +360,14 @@ fn substitute(value: &str, params: &HashMap<String, String>) -> Result<String, S
             return Err(format!("a lone '$' in \"{value}\""));
         }
         match params.get(name) {
-            Some(v) => out.push_str(v),
+            Some(v) => {
+                if out.len() + v.len() > MAX_EXPANSION {
+                    return Err(format!(
+                        "parameter substitution produces more than {MAX_EXPANSION} bytes (defaults that repeat defaults?)"
+                    ));
+                }
+                out.push_str(v)
+            }
             None => {
                 return Err(format!(
                     "parameter ${name} has no value: add <default name=\"{name}\" value=\"...\"/> or pass -D {name}=..."
@@ -355,6 +408,42 @@ mod tests {
         .err()
         .unwrap();
         assert!(e.to_string().contains("$nope"), "{e}");
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_without_overflowing_the_stack() {
+        let depth = 5000;
+        let text = format!(
+            "<scene version=\"3.0.0\">{}{}</scene>",
+            "<a>".repeat(depth),
+            "</a>".repeat(depth)
+        );
+        let e = parse(Path::new("t.xml"), &text, &[]).err().unwrap();
+        assert!(e.message.contains("deeper than"), "{e}");
+        let ok = format!(
+            "<scene version=\"3.0.0\">{}{}</scene>",
+            "<a>".repeat(50),
+            "</a>".repeat(50)
+        );
+        assert!(parse(Path::new("t.xml"), &ok, &[]).is_ok());
+    }
+
+    #[test]
+    fn default_expansion_bombs_are_refused() {
+        // Each default doubles the one before: 2^40 bytes if expanded, in a 1 KB file.
+        let mut text =
+            String::from("<scene version=\"3.0.0\"><default name=\"d0\" value=\"xxxxxxxxxxxxxxxx\"/>");
+        for i in 1..40 {
+            text.push_str(&format!(
+                "<default name=\"d{i}\" value=\"$d{}$d{}\"/>",
+                i - 1,
+                i - 1
+            ));
+        }
+        text.push_str("</scene>");
+        assert!(text.len() < 2048);
+        let e = parse(Path::new("t.xml"), &text, &[]).err().unwrap();
+        assert!(e.message.contains("more than"), "{e}");
     }
 
     #[test]

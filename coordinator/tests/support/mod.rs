@@ -68,10 +68,16 @@ pub fn serve(data: &Path, bind: &str, extra: &[&str], env: &[(&str, &str)]) -> (
 
 /// Starts a one-thread worker named `name`, caching bundles under `cache`.
 pub fn worker(url: &str, name: &str, cache: &Path) -> Proc {
+    worker_with_env(url, name, cache, &[])
+}
+
+/// [`worker`] with extra environment (a token).
+pub fn worker_with_env(url: &str, name: &str, cache: &Path, env: &[(&str, &str)]) -> Proc {
     Proc(
         Command::new(worker_bin())
             .args(["--coordinator", url, "--threads", "1", "--name", name, "--cache"])
             .arg(cache.join(name))
+            .envs(env.iter().copied())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
