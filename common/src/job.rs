@@ -230,7 +230,7 @@ mod tests {
     #[test]
     fn declared_iterations_must_be_positive() {
         let sppm = JobSettings {
-            integrator: Integrator::Sppm,
+            integrator: Some(Integrator::Sppm),
             ..JobSettings::default()
         };
         for bad in ["0", "-5"] {

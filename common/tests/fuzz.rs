@@ -157,7 +157,11 @@ fn bundle_unpacker_never_panics_or_escapes() {
         "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
     )
     .unwrap();
-    let seeds = vec![pack(&src.path().join("scene.xml"), &[PathBuf::from("meshes/a.obj")]).unwrap()];
+    let seeds = vec![
+        pack(&src.path().join("scene.xml"), &[src.path().join("meshes/a.obj")])
+            .unwrap()
+            .0,
+    ];
     let root = tempfile::tempdir().unwrap();
     let limits = UnpackLimits {
         max_files: 100,
