@@ -669,6 +669,8 @@ impl<'a> Builder<'a> {
         let sigma_t = p.non_negative_rgb("sigma_t", Rgb::ONE)? * scale;
         let albedo = p.reflectance("albedo", Rgb::splat(0.75))?;
         let _ = p.boolean("sample_emitters")?;
+        // Only spectral variants read it.
+        let _ = p.boolean("has_spectral_extinction")?;
         let phase = match p.object("phase")? {
             None => Phase::Isotropic,
             Some(ph) => {

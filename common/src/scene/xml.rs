@@ -66,6 +66,7 @@ pub(crate) struct Parsed {
 /// which override the scene's `<default>`s.
 pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Result<Parsed, SceneError> {
     let mut reader = Reader {
+        enclosing: Vec::new(),
         budget: MAX_EXPANSION,
         params: defines.iter().cloned().collect(),
         used: defines.iter().map(|(k, _)| (k.clone(), false)).collect(),
@@ -101,6 +102,8 @@ pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Re
 
 /// Parameters, folders and files gathered across the scene and its includes.
 struct Reader {
+    /// Folders of the files whose includes are being read, outermost first.
+    enclosing: Vec<PathBuf>,
     /// Bytes that `$name` substitution may still produce.
     budget: usize,
     params: HashMap<String, String>,
@@ -228,10 +231,13 @@ impl Reader {
                         .attribute("value")
                         .ok_or_else(|| ctx.err(c, "a <path> needs a value".into()))?;
                     let value = self.substitute(value).map_err(|m| ctx.err(c, m))?;
-                    let dir = ctx.dir().join(&value);
-                    if !dir.is_dir() {
-                        return Err(ctx.err(c, format!("folder \"{}\" not found", dir.display())));
-                    }
+                    // Relative to the file that says it, else wherever files are searched.
+                    let dir = self
+                        .search_order(ctx)
+                        .into_iter()
+                        .map(|d| d.join(&value))
+                        .find(|d| d.is_dir())
+                        .ok_or_else(|| ctx.err(c, format!("folder \"{value}\" not found")))?;
                     self.search_dirs.insert(0, dir);
                 }
                 "include" => {
@@ -245,16 +251,19 @@ impl Reader {
                             format!("includes nest more than {MAX_INCLUDE_DEPTH} deep (do they include each other?)"),
                         ));
                     }
-                    let path = [ctx.dir()]
+                    let path = self
+                        .search_order(ctx)
                         .into_iter()
-                        .chain(self.search_dirs.iter().cloned())
                         .map(|d| d.join(&name))
                         .find(|p| p.is_file())
                         .ok_or_else(|| ctx.err(c, format!("included file \"{name}\" not found")))?;
                     let text = std::fs::read_to_string(&path)
                         .map_err(|e| ctx.err(c, format!("cannot read {}: {e}", path.display())))?;
                     self.includes.push(path.clone());
-                    let mut included = self.file(&path, &text, ctx.depth + 1, false)?;
+                    self.enclosing.push(ctx.dir());
+                    let included = self.file(&path, &text, ctx.depth + 1, false);
+                    self.enclosing.pop();
+                    let mut included = included?;
                     if let Some(prop) = c.attribute("name")
                         && let [one] = included.as_mut_slice()
                     {
@@ -267,6 +276,16 @@ impl Reader {
             }
         }
         Ok(out)
+    }
+
+    /// Where an include or a `<path>` named in the file being read is looked for, as Mitsuba's
+    /// nested file resolvers do: that file's folder, then the folders of the files that
+    /// included it (innermost first), then the `<path>` folders.
+    fn search_order(&self, ctx: &FileCtx) -> Vec<PathBuf> {
+        let mut dirs = vec![ctx.dir()];
+        dirs.extend(self.enclosing.iter().rev().cloned());
+        dirs.extend(self.search_dirs.iter().cloned());
+        dirs
     }
 
     /// Replaces every `$name` by its parameter's value, noting which `-D` parameters are used.
