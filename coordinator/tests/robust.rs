@@ -641,3 +641,37 @@ async fn a_trickling_request_head_is_cut_off() {
         tokio::time::sleep(Duration::from_millis(1500)).await;
     }
 }
+
+/// Loading a scene runs in a child process with a time limit: a scene that takes too long to
+/// load (here 120 rough plastics, each tabulating its albedo) is refused, and the coordinator
+/// goes on serving.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_scene_that_loads_too_long_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--scene-check-timeout", "1"],
+    );
+    let api = Api::new(&url);
+    let bsdfs: String = (0..120)
+        .map(|i| {
+            format!(
+                r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
+                100 + i
+            )
+        })
+        .collect();
+    let text = String::from_utf8(scene("", 8, 8))
+        .unwrap()
+        .replacen("<sensor", &format!("{bsdfs}<sensor"), 1);
+    let start = Instant::now();
+    refused(
+        api.submit(tar_of(&[("s.xml", text.as_bytes())]), "{}").await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "--scene-check-timeout",
+    );
+    assert!(start.elapsed() < Duration::from_secs(3), "{:?}", start.elapsed());
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+}
