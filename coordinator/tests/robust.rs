@@ -131,6 +131,31 @@ fn error_of(v: &Value) -> &str {
         .unwrap_or_else(|| panic!("not a JSON error: {v}"))
 }
 
+/// A scene that takes about `seconds` to load: rough plastics, each tabulating its coating's
+/// albedo when loaded, as many as this machine needs (measured here, so the test holds
+/// whatever the cost of one).
+fn slow_scene(seconds: f64) -> Vec<u8> {
+    let with = |n: usize| -> String {
+        let bsdfs: String = (0..n)
+            .map(|i| {
+                format!(
+                    r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
+                    100 + i % 800
+                )
+            })
+            .collect();
+        String::from_utf8(scene("", 8, 8))
+            .unwrap()
+            .replacen("<sensor", &format!("{bsdfs}<sensor"), 1)
+    };
+    let probe = 20;
+    let start = Instant::now();
+    photonfarm::scene::Scene::from_str(&with(probe), Path::new("probe.xml"), &[]).unwrap();
+    let each = start.elapsed().as_secs_f64() / probe as f64;
+    let n = ((seconds / each.max(1e-6)) as usize).clamp(probe, 100_000);
+    with(n).into_bytes()
+}
+
 /// Asserts a refusal with `status` whose message contains `needle`.
 fn refused(got: (StatusCode, Value), status: StatusCode, needle: &str) {
     assert_eq!(got.0, status, "{}", got.1);
@@ -574,20 +599,9 @@ async fn a_long_scene_check_outlives_the_idle_timeout() {
     let dir = tempfile::tempdir().unwrap();
     let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &["--idle-timeout", "1"]);
     let api = Api::new(&url);
-    // Each rough plastic tabulates its coating's albedo when loaded (a few milliseconds).
-    let bsdfs: String = (0..120)
-        .map(|i| {
-            format!(
-                r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
-                100 + i
-            )
-        })
-        .collect();
-    let text = String::from_utf8(scene("", 8, 8))
-        .unwrap()
-        .replacen("<sensor", &format!("{bsdfs}<sensor"), 1);
+    let text = slow_scene(3.0);
     let start = Instant::now();
-    let (s, v) = api.submit(tar_of(&[("s.xml", text.as_bytes())]), "{}").await;
+    let (s, v) = api.submit(tar_of(&[("s.xml", &text)]), "{}").await;
     let took = start.elapsed();
     eprintln!("the scene check took {took:?}");
     assert_eq!(s, StatusCode::CREATED, "{v}");
@@ -643,7 +657,7 @@ async fn a_trickling_request_head_is_cut_off() {
 }
 
 /// Loading a scene runs in a child process with a time limit: a scene that takes too long to
-/// load (here 120 rough plastics, each tabulating its albedo) is refused, and the coordinator
+/// load (about 3 s of rough plastics for a 1 s limit) is refused, and the coordinator
 /// goes on serving.
 #[tokio::test(flavor = "multi_thread")]
 async fn a_scene_that_loads_too_long_is_refused() {
@@ -654,20 +668,10 @@ async fn a_scene_that_loads_too_long_is_refused() {
         &["--scene-check-timeout", "1"],
     );
     let api = Api::new(&url);
-    let bsdfs: String = (0..120)
-        .map(|i| {
-            format!(
-                r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
-                100 + i
-            )
-        })
-        .collect();
-    let text = String::from_utf8(scene("", 8, 8))
-        .unwrap()
-        .replacen("<sensor", &format!("{bsdfs}<sensor"), 1);
+    let text = slow_scene(3.0);
     let start = Instant::now();
     refused(
-        api.submit(tar_of(&[("s.xml", text.as_bytes())]), "{}").await,
+        api.submit(tar_of(&[("s.xml", &text)]), "{}").await,
         StatusCode::UNPROCESSABLE_ENTITY,
         "--scene-check-timeout",
     );
