@@ -264,7 +264,6 @@ async fn bundle_to_disk(field: &mut axum::extract::multipart::Field<'_>, path: &
 /// `POST /api/jobs`: multipart with `bundle` (tar), optional `scene` (its path in the bundle)
 /// and optional `settings` (JSON).
 async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<Response> {
-    let _slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
     let n = state.uploads.fetch_add(1, Ordering::Relaxed);
     let scratch = state.layout.scratch_dir(&format!("{}-{n}", std::process::id()));
     let out = receive_and_accept(&state, req, &scratch).await;
@@ -273,6 +272,9 @@ async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<R
 }
 
 async fn receive_and_accept(state: &Arc<AppState>, req: Request, scratch: &FsPath) -> ApiResult<Response> {
+    // An upload slot while the body is read; the scene check that follows waits for its own
+    // turn without holding one, so slow checks never hold up workers' results.
+    let slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
     let mut multipart = Multipart::from_request(req, state)
         .await
         .map_err(|e| ApiError::new(e.status(), e.body_text()))?;
@@ -301,6 +303,7 @@ async fn receive_and_accept(state: &Arc<AppState>, req: Request, scratch: &FsPat
     }
     let hash =
         hash.ok_or_else(|| ApiError::new(StatusCode::BAD_REQUEST, "the form has no \"bundle\" field"))?;
+    drop(slot);
     let _check = state.scene_checks.acquire().await.map_err(ApiError::internal)?;
     let st = state.clone();
     let scratch = scratch.to_path_buf();
