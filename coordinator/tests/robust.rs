@@ -418,7 +418,12 @@ async fn a_job_that_cannot_be_resumed_fails_alone_and_the_coordinator_starts() {
         )
         .unwrap();
     }
+    // And a submission a crash interrupted left its scratch folder.
+    let scratch = data.join("bundles/incoming-1-0");
+    std::fs::create_dir_all(&scratch).unwrap();
+    std::fs::write(scratch.join("bundle.tar"), b"partial").unwrap();
     let (_coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    assert!(!scratch.exists(), "scratch folders are cleared at start");
     let api = Api::new(&url);
     for (id, needle) in [
         (ids[0], "damaged"),
