@@ -688,3 +688,24 @@ async fn a_scene_that_loads_too_long_is_refused() {
     let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
     assert_eq!(s, StatusCode::CREATED, "{v}");
 }
+
+/// A storage failure is the coordinator's fault: a 500 without details (it used to be a 400,
+/// with the server's paths in the message), and the service goes on.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_storage_failure_is_a_500_without_details() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (_coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    // The bundles folder becomes a file: nothing can be stored under it.
+    std::fs::remove_dir_all(data.join("bundles")).unwrap();
+    std::fs::write(data.join("bundles"), b"not a folder").unwrap();
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    assert_eq!(s, StatusCode::INTERNAL_SERVER_ERROR, "{v}");
+    let msg = error_of(&v);
+    assert!(
+        !msg.contains(data.to_str().unwrap()) && !msg.contains("bundles"),
+        "{msg}"
+    );
+    assert_eq!(api.get("/api/jobs").await.0, StatusCode::OK);
+}
