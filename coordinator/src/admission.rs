@@ -36,6 +36,8 @@ pub struct Admission {
     pub idle_timeout_s: u64,
     /// Seconds a request head may take from its first byte to its end, however it trickles.
     pub header_timeout_s: u64,
+    /// Seconds a submitted scene may take to load and check.
+    pub scene_check_timeout_s: u64,
 }
 
 impl Admission {
@@ -54,6 +56,7 @@ impl Admission {
             max_connections: 256,
             idle_timeout_s: 60,
             header_timeout_s: 10,
+            scene_check_timeout_s: 120,
         }
     }
 

@@ -20,7 +20,6 @@ use photonfarm::bundle::BundleError;
 use photonfarm::job::JobSettings;
 use photonfarm::protocol::{LEASE_KEY_HEADER, LeaseRequest, Release, decode_batch, max_encoded_batch};
 use photonfarm::render::Method;
-use photonfarm::scene::Scene;
 use serde_json::json;
 use sha2::{Digest, Sha256};
 use tokio::io::AsyncWriteExt;
@@ -29,6 +28,7 @@ use tokio::sync::Semaphore;
 use crate::accumulator::Accumulator;
 use crate::admission::Admission;
 use crate::farm::{Committed, Farm, FarmError};
+use crate::scene_check::{CheckError, check_in_child};
 use crate::store::Layout;
 
 /// Who may call what: users submit and read jobs, workers lease and render. Separate tokens
@@ -52,6 +52,8 @@ pub struct AppState {
     pub tokens: Tokens,
     /// The limits every request is held to.
     pub admission: Admission,
+    /// Checks submitted scenes in a child process, if set (see [`crate::scene_check`]).
+    pub checker: Option<PathBuf>,
     /// Names scratch folders for incoming bundles.
     pub uploads: AtomicU64,
     /// Uploads read at once (bounds the memory they take together).
@@ -262,7 +264,6 @@ async fn bundle_to_disk(field: &mut axum::extract::multipart::Field<'_>, path: &
 /// `POST /api/jobs`: multipart with `bundle` (tar), optional `scene` (its path in the bundle)
 /// and optional `settings` (JSON).
 async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<Response> {
-    let _slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
     let n = state.uploads.fetch_add(1, Ordering::Relaxed);
     let scratch = state.layout.scratch_dir(&format!("{}-{n}", std::process::id()));
     let out = receive_and_accept(&state, req, &scratch).await;
@@ -271,6 +272,9 @@ async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<R
 }
 
 async fn receive_and_accept(state: &Arc<AppState>, req: Request, scratch: &FsPath) -> ApiResult<Response> {
+    // An upload slot while the body is read; the scene check that follows waits for its own
+    // turn without holding one, so slow checks never hold up workers' results.
+    let slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
     let mut multipart = Multipart::from_request(req, state)
         .await
         .map_err(|e| ApiError::new(e.status(), e.body_text()))?;
@@ -299,6 +303,7 @@ async fn receive_and_accept(state: &Arc<AppState>, req: Request, scratch: &FsPat
     }
     let hash =
         hash.ok_or_else(|| ApiError::new(StatusCode::BAD_REQUEST, "the form has no \"bundle\" field"))?;
+    drop(slot);
     let _check = state.scene_checks.acquire().await.map_err(ApiError::internal)?;
     let st = state.clone();
     let scratch = scratch.to_path_buf();
@@ -358,35 +363,43 @@ fn accept_bundle(
             limits.max_geometry
         )));
     }
-    let loaded =
-        Scene::load_inside(&files_dir.join(&scene_rel), &settings.defines, &files_dir).map_err(|mut e| {
-            // Name files as the user knows them: relative to the bundle, never by the
-            // coordinator's own paths (the message may quote a resolved path too).
-            e.file = e
-                .file
-                .strip_prefix(&files_dir)
-                .map(PathBuf::from)
-                .unwrap_or(e.file);
+    let scene_path = files_dir.join(&scene_rel);
+    let checked = match &state.checker {
+        Some(program) => check_in_child(
+            program,
+            &scene_path,
+            &files_dir,
+            &settings,
+            scratch,
+            std::time::Duration::from_secs(limits.scene_check_timeout_s),
+        ),
+        None => crate::scene_check::check(&scene_path, &files_dir, &settings).map_err(CheckError::Refused),
+    }
+    .map_err(|e| match e {
+        CheckError::Internal(m) => ApiError::internal(m),
+        // Name files as the user knows them: relative to the bundle, never by the
+        // coordinator's own paths.
+        other => {
             let ours = files_dir.display().to_string();
             let real = files_dir
                 .canonicalize()
                 .map_or_else(|_| ours.clone(), |p| p.display().to_string());
-            bad(e
+            bad(other
                 .to_string()
                 .replace(&format!("{real}/"), "")
                 .replace(&format!("{ours}/"), ""))
-        })?;
-    let resolved = settings.resolve(&loaded, false).map_err(|e| bad(e.to_string()))?;
-    let total = resolved.passes.expect("closed-ended resolution has a count");
+        }
+    })?;
+    let total = checked.total;
     limits
         .job
-        .check_job(loaded.width(), loaded.height(), Some(total), &resolved.render)
+        .check_job(checked.width, checked.height, Some(total), &checked.render)
         .map_err(|e| bad(e.to_string()))?;
     // Everything that takes time or memory, before the lock: the empty sum, the archive and
     // its unpacked files in their content-addressed places.
     let window = settings.checkpoint_every.unwrap_or(0);
     let sum = Accumulator::new(
-        photonfarm::film::FilmSum::new(loaded.width(), loaded.height()),
+        photonfarm::film::FilmSum::new(checked.width, checked.height),
         window,
     );
     let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
@@ -409,7 +422,7 @@ fn accept_bundle(
         };
         let id = farm.create_job(
             &settings,
-            resolved.render,
+            checked.render,
             total,
             &scene_rel.to_string_lossy(),
             hash,
@@ -419,13 +432,7 @@ fn accept_bundle(
     })?;
     tracing::info!(job = id, total, "job accepted");
     let mut body = serde_json::to_value(status).expect("status serialises");
-    body["warnings"] = json!(
-        loaded
-            .warnings
-            .iter()
-            .chain(&resolved.warnings)
-            .collect::<Vec<_>>()
-    );
+    body["warnings"] = json!(checked.warnings);
     Ok((StatusCode::CREATED, Json(body)).into_response())
 }
 

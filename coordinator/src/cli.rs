@@ -26,6 +26,25 @@ pub enum Command {
     Submit(SubmitArgs),
     /// Chart error against render time for several methods or settings.
     Converge(ConvergeArgs),
+    /// The service's scene checker (run by `serve` in a child process).
+    #[command(hide = true)]
+    CheckScene(CheckSceneArgs),
+}
+
+/// `coordinator check-scene` (internal).
+#[derive(Debug, clap::Args)]
+pub struct CheckSceneArgs {
+    /// The scene file.
+    pub scene: PathBuf,
+    /// The folder every file the scene reads must lie in (the job's bundle).
+    #[arg(long)]
+    pub root: PathBuf,
+    /// The job's settings, as JSON.
+    #[arg(long)]
+    pub settings: String,
+    /// Where to write the report.
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// `coordinator converge`.
@@ -276,6 +295,9 @@ pub struct ServeArgs {
     /// Seconds a request head may take to arrive, from its first byte.
     #[arg(long, default_value_t = 10)]
     pub header_timeout: u64,
+    /// Seconds a submitted scene may take to load (in a child process, killed beyond).
+    #[arg(long, default_value_t = 120)]
+    pub scene_check_timeout: u64,
     /// Seconds without a heartbeat after which a batch goes to another worker.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
@@ -321,5 +343,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => crate::serve_command::run(args),
         Command::Submit(args) => crate::client::run_submit(&args),
         Command::Converge(args) => crate::converge::run(&args),
+        Command::CheckScene(args) => {
+            crate::scene_check::run_child(&args.scene, &args.root, &args.settings, &args.out)
+        }
     }
 }

@@ -26,6 +26,7 @@ fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
     a.max_connections = args.max_connections;
     a.idle_timeout_s = args.idle_timeout;
     a.header_timeout_s = args.header_timeout;
+    a.scene_check_timeout_s = args.scene_check_timeout;
     let zero = [
         ("--max-pixels", a.job.max_pixels),
         ("--max-passes", a.job.max_passes),
@@ -36,6 +37,7 @@ fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
         ("--max-connections", a.max_connections as u64),
         ("--idle-timeout", a.idle_timeout_s),
         ("--header-timeout", a.header_timeout_s),
+        ("--scene-check-timeout", a.scene_check_timeout_s),
     ];
     if let Some((flag, _)) = zero.iter().find(|(_, v)| *v == 0) {
         bail!("{flag} must be at least 1");
@@ -70,6 +72,8 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     let config = ServeConfig {
         data: args.data.clone(),
         tokens: Tokens { client, worker },
+        // Scenes are checked by this program in a child process.
+        checker: std::env::current_exe().ok(),
         admission,
         farm: FarmConfig {
             scheduler: SchedulerConfig {

@@ -26,6 +26,9 @@ pub struct ServeConfig {
     pub tokens: Tokens,
     /// Limits on every request (the job limits also go to the farm, for jobs it reloads).
     pub admission: Admission,
+    /// The program that checks submitted scenes in a child process (`coordinator
+    /// check-scene`); None checks them in this process.
+    pub checker: Option<PathBuf>,
     /// Scheduling.
     pub farm: FarmConfig,
 }
@@ -49,6 +52,7 @@ pub async fn run(
         farm: std::sync::Mutex::new(farm),
         tokens: config.tokens.clone(),
         admission,
+        checker: config.checker.clone(),
         uploads: AtomicU64::new(0),
         upload_slots: Semaphore::new(admission.max_uploads.max(1)),
         scene_checks: Semaphore::new(admission.max_scene_checks.max(1)),

@@ -221,6 +221,14 @@ impl Store {
             "ALTER TABLE jobs ADD COLUMN image_passes INTEGER NOT NULL DEFAULT 0",
             [],
         );
+        // Scratch folders of submissions a crash interrupted: nothing refers to them.
+        if let Ok(entries) = std::fs::read_dir(dir.join("bundles")) {
+            for e in entries.flatten() {
+                if e.file_name().to_string_lossy().starts_with("incoming-") {
+                    let _ = std::fs::remove_dir_all(e.path());
+                }
+            }
+        }
         let id_floor = std::fs::read_dir(dir.join("jobs"))
             .map_err(io(dir))?
             .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u64>().ok())

@@ -148,7 +148,7 @@ fn timed_get(addr: &str, path: &str) -> Duration {
 #[tokio::test(flavor = "multi_thread")]
 async fn the_api_answers_within_50_ms_while_a_huge_job_is_submitted_and_results_are_written() {
     let dir = tempfile::tempdir().unwrap();
-    let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let (coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &[]);
     let api = Api::new(&url);
     let addr = url.strip_prefix("http://").unwrap().to_string();
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -207,7 +207,12 @@ async fn the_api_answers_within_50_ms_while_a_huge_job_is_submitted_and_results_
     assert_eq!(v["checkpoint_iterations"], 3, "{v}");
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let (worst, n) = poller.join().unwrap();
-    eprintln!("{n} status requests, the slowest in {worst:?}");
+    let status = std::fs::read_to_string(format!("/proc/{}/status", coordinator.0.id())).unwrap();
+    let peak = status.lines().find(|l| l.starts_with("VmHWM")).unwrap_or("");
+    eprintln!(
+        "{n} status requests, the slowest in {worst:?}; {} B results; coordinator {peak}",
+        encoded.len()
+    );
     assert!(n >= 10, "too few samples: {n}");
     assert!(worst < Duration::from_millis(50), "the API stalled for {worst:?}");
 }

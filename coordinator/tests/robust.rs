@@ -131,6 +131,35 @@ fn error_of(v: &Value) -> &str {
         .unwrap_or_else(|| panic!("not a JSON error: {v}"))
 }
 
+/// A scene that takes about `seconds` to load: rough plastics, each tabulating its coating's
+/// albedo when loaded, as many as this machine needs (measured here, so the test holds
+/// whatever the cost of one).
+fn slow_scene(seconds: f64) -> Vec<u8> {
+    let with = |n: usize| -> String {
+        let bsdfs: String = (0..n)
+            .map(|i| {
+                format!(
+                    r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
+                    100 + i % 800
+                )
+            })
+            .collect();
+        String::from_utf8(scene("", 8, 8))
+            .unwrap()
+            .replacen("<sensor", &format!("{bsdfs}<sensor"), 1)
+    };
+    let time = |n: usize| {
+        let text = with(n);
+        let start = Instant::now();
+        photonfarm::scene::Scene::from_str(&text, Path::new("probe.xml"), &[]).unwrap();
+        start.elapsed().as_secs_f64()
+    };
+    // The difference of two loads leaves out what every scene costs.
+    let each = (time(40) - time(10)) / 30.0;
+    let n = ((seconds / each.max(1e-6)) as usize).clamp(40, 100_000);
+    with(n).into_bytes()
+}
+
 /// Asserts a refusal with `status` whose message contains `needle`.
 fn refused(got: (StatusCode, Value), status: StatusCode, needle: &str) {
     assert_eq!(got.0, status, "{}", got.1);
@@ -389,7 +418,12 @@ async fn a_job_that_cannot_be_resumed_fails_alone_and_the_coordinator_starts() {
         )
         .unwrap();
     }
+    // And a submission a crash interrupted left its scratch folder.
+    let scratch = data.join("bundles/incoming-1-0");
+    std::fs::create_dir_all(&scratch).unwrap();
+    std::fs::write(scratch.join("bundle.tar"), b"partial").unwrap();
     let (_coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    assert!(!scratch.exists(), "scratch folders are cleared at start");
     let api = Api::new(&url);
     for (id, needle) in [
         (ids[0], "damaged"),
@@ -574,20 +608,9 @@ async fn a_long_scene_check_outlives_the_idle_timeout() {
     let dir = tempfile::tempdir().unwrap();
     let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &["--idle-timeout", "1"]);
     let api = Api::new(&url);
-    // Each rough plastic tabulates its coating's albedo when loaded (a few milliseconds).
-    let bsdfs: String = (0..120)
-        .map(|i| {
-            format!(
-                r#"<bsdf type="roughplastic" id="p{i}"><string name="distribution" value="ggx"/><float name="alpha" value="0.{}"/></bsdf>"#,
-                100 + i
-            )
-        })
-        .collect();
-    let text = String::from_utf8(scene("", 8, 8))
-        .unwrap()
-        .replacen("<sensor", &format!("{bsdfs}<sensor"), 1);
+    let text = slow_scene(3.0);
     let start = Instant::now();
-    let (s, v) = api.submit(tar_of(&[("s.xml", text.as_bytes())]), "{}").await;
+    let (s, v) = api.submit(tar_of(&[("s.xml", &text)]), "{}").await;
     let took = start.elapsed();
     eprintln!("the scene check took {took:?}");
     assert_eq!(s, StatusCode::CREATED, "{v}");
@@ -640,4 +663,49 @@ async fn a_trickling_request_head_is_cut_off() {
         assert_eq!(api.get("/api/jobs").await.0, StatusCode::OK);
         tokio::time::sleep(Duration::from_millis(1500)).await;
     }
+}
+
+/// Loading a scene runs in a child process with a time limit: a scene that takes too long to
+/// load (about 3 s of rough plastics for a 1 s limit) is refused, and the coordinator
+/// goes on serving.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_scene_that_loads_too_long_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--scene-check-timeout", "1"],
+    );
+    let api = Api::new(&url);
+    let text = slow_scene(3.0);
+    let start = Instant::now();
+    refused(
+        api.submit(tar_of(&[("s.xml", &text)]), "{}").await,
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "--scene-check-timeout",
+    );
+    assert!(start.elapsed() < Duration::from_secs(3), "{:?}", start.elapsed());
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+}
+
+/// A storage failure is the coordinator's fault: a 500 without details (it used to be a 400,
+/// with the server's paths in the message), and the service goes on.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_storage_failure_is_a_500_without_details() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (_coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let api = Api::new(&url);
+    // The bundles folder becomes a file: nothing can be stored under it.
+    std::fs::remove_dir_all(data.join("bundles")).unwrap();
+    std::fs::write(data.join("bundles"), b"not a folder").unwrap();
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    assert_eq!(s, StatusCode::INTERNAL_SERVER_ERROR, "{v}");
+    let msg = error_of(&v);
+    assert!(
+        !msg.contains(data.to_str().unwrap()) && !msg.contains("bundles"),
+        "{msg}"
+    );
+    assert_eq!(api.get("/api/jobs").await.0, StatusCode::OK);
 }
