@@ -236,3 +236,39 @@ fn a_worker_stopped_with_sigterm_delivers_its_batch_and_exits() {
     );
     assert_eq!(after["workers"], serde_json::json!([]), "no lease left behind");
 }
+
+/// A Mitsuba documentation scene that reads its meshes through `<path value="../../common"/>`:
+/// `submit` packs it with every file it reads under their common folder, the coordinator and the
+/// worker load it confined to that bundle, and the farm gives the bytes of a local render.
+#[test]
+fn a_scene_reading_outside_its_folder_submits_and_gives_the_local_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "0.2"],
+    );
+    let _w = worker(&url, "w1", dir.path());
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/refs/mitsuba-data/docs/scenes/integrator_depth_3.xml");
+    let job = ["--spp", "6", "--seed", "5", "-D", "width=24", "-D", "height=16"];
+    let out = dir.path().join("depth.exr");
+    let o = Command::new(coordinator_bin())
+        .args(["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(job)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = Command::new(coordinator_bin())
+        .args(["submit", "--to", &url, scene.to_str().unwrap()])
+        .args(job)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let id: u64 = String::from_utf8_lossy(&o.stdout).trim().parse().unwrap();
+    wait_done(&url, id);
+    assert!(
+        image(&url, id) == std::fs::read(out).unwrap(),
+        "farm and local bytes differ"
+    );
+}
