@@ -9,8 +9,11 @@
 //!   filter;
 //! - `docs/scenes/integrator_depth_3.xml`: `<path value="../../common">`, `max_depth` 3, a
 //!   top-level spectral area emitter;
-//! - `docs/scenes/integrator_direct_both.xml`: Veach's MIS scene, an included scene file,
-//!   Beckmann rough plastic by default, the `direct` integrator with one sample of each kind.
+//! - `docs/scenes/integrator_direct_both.xml`, `_lum.xml`, `_bsdf.xml`: Veach's MIS scene, an
+//!   included scene file, Beckmann rough plastic by default, sphere lights, the `direct`
+//!   integrator with one sample of each kind, light samples only, BSDF samples only;
+//! - `docs/scenes/integrator_depth_inf.xml`, `variants_cbox_rgb.xml`: the Cornell box with
+//!   unlimited depth (also with SPPM), and with spectral reflectances.
 //!
 //! Criteria: channel means within 1% and an MSE at most 1.25 times Mitsuba's at equal spp.
 
@@ -56,4 +59,38 @@ fn mitsuba_docs_veach_direct_matches_mitsuba() {
         &[("width", "96"), ("height", "64")],
         "mitsuba-veach-direct",
     );
+}
+
+#[test]
+fn mitsuba_docs_veach_light_samples_only_matches_mitsuba() {
+    let scene = refs_dir().join("mitsuba-data/docs/scenes/integrator_direct_lum.xml");
+    check_scene_against_mitsuba(&scene, &[("width", "96"), ("height", "64")], "mitsuba-veach-lum");
+}
+
+#[test]
+fn mitsuba_docs_veach_bsdf_samples_only_matches_mitsuba() {
+    let scene = refs_dir().join("mitsuba-data/docs/scenes/integrator_direct_bsdf.xml");
+    check_scene_against_mitsuba(&scene, &[("width", "96"), ("height", "64")], "mitsuba-veach-bsdf");
+}
+
+#[test]
+fn mitsuba_docs_variants_cbox_rgb_matches_mitsuba() {
+    let scene = refs_dir().join("mitsuba-data/docs/scenes/variants_cbox_rgb.xml");
+    check_scene_against_mitsuba(
+        &scene,
+        &[("width", "64"), ("height", "64")],
+        "mitsuba-variants-cbox-rgb",
+    );
+}
+
+#[test]
+fn mitsuba_docs_depth_inf_path_and_sppm_match_mitsuba() {
+    let path = refs_dir().join("mitsuba-data/docs/scenes/integrator_depth_inf.xml");
+    let defines = [("width", "64"), ("height", "64")];
+    check_scene_against_mitsuba(&path, &defines, "mitsuba-depth-inf");
+    let scene = load(&path, &defines);
+    let film = render_sppm(&scene, sppm_settings(&scene, 100_000), 32, 1);
+    let cmp = compare(&film.image().unwrap(), &reference("mitsuba-depth-inf.exr"));
+    eprintln!("depth-inf SPPM: means {:?} vs {:?}", cmp.mean, cmp.reference_mean);
+    assert!(cmp.worst_mean_error() < 0.02, "{cmp:?}");
 }

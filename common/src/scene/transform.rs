@@ -79,7 +79,15 @@ pub(crate) fn parse_transform(props: &Props, el: &Element) -> Res<Mat4> {
             "lookat" => {
                 let origin = triple("origin")?.ok_or_else(|| ctx.err(op, "missing origin"))?;
                 let target = triple("target")?.ok_or_else(|| ctx.err(op, "missing target"))?;
-                let up = triple("up")?.unwrap_or(Vec3::Y);
+                // Mitsuba: with no (or a zero) up, the first tangent of Duff et al.'s basis
+                // around the view direction.
+                let up = match triple("up")? {
+                    Some(up) if up != Vec3::ZERO => up,
+                    _ => {
+                        let dir = crate::geometry::Frame::from_normal((target - origin).normalize().into());
+                        Vec3::from(dir.s)
+                    }
+                };
                 look_at(origin, target, up).ok_or_else(|| {
                     ctx.err(
                         op,
@@ -108,4 +116,37 @@ fn look_at(origin: Vec3, target: Vec3, up: Vec3) -> Option<Mat4> {
         dir.extend(0.0),
         Vec4::new(origin.x, origin.y, origin.z, 1.0),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use crate::scene::Scene;
+
+    /// A `lookat` without `up`: Mitsuba builds one from the view direction. The expected matrix
+    /// is Mitsuba 3.9.1's (scalar_rgb) `world_transform()` of the same sensor.
+    #[test]
+    fn lookat_without_up_matches_mitsuba() {
+        let text = r#"<scene version="3.0.0"><sensor type="perspective">
+            <transform name="to_world"><lookat origin="1, 2, 5" target="0, 0.5, 0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="4"/><integer name="height" value="4"/></film>
+            </sensor></scene>"#;
+        let scene = Scene::from_str(text, Path::new("t.xml"), &[]).unwrap();
+        let m = scene.camera.to_world.to_cols_array_2d();
+        let mitsuba = [
+            [-0.0273596, 0.98176, -0.188144, 1.0],
+            [0.958961, -0.0273596, -0.282216, 2.0],
+            [-0.282216, -0.188144, -0.940721, 5.0],
+        ];
+        for (row, want) in mitsuba.iter().enumerate() {
+            for (col, w) in want.iter().enumerate() {
+                assert!(
+                    (m[col][row] - w).abs() < 1e-5,
+                    "row {row} col {col}: {} vs {w}",
+                    m[col][row]
+                );
+            }
+        }
+    }
 }
