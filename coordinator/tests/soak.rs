@@ -1,6 +1,8 @@
 //! A bounded soak over loopback: slow connections, good and bad submissions, bad results and a
-//! real worker at once, for a few seconds. The coordinator must keep answering, keep its
-//! descriptors and memory bounded, finish every good job, and restart cleanly.
+//! real worker at once, for a few seconds, with the coordinator's address space capped by the
+//! operating system. The coordinator must keep answering, keep its descriptors and memory
+//! bounded, lose nothing across a SIGKILL in the middle, finish every good job with the bytes of
+//! `coordinator render`, and restart cleanly.
 
 mod support;
 
@@ -13,6 +15,10 @@ use reqwest::multipart::{Form, Part};
 use serde_json::Value;
 
 const TOKEN: &str = "soak-token";
+
+/// The coordinator's address-space cap (virtual memory: thread stacks and allocator arenas
+/// count, so it is well above the resident peak asserted below).
+const ADDRESS_SPACE_MB: u64 = 2048;
 
 fn tar_of(files: &[(&str, &[u8])]) -> Vec<u8> {
     let mut b = tar::Builder::new(Vec::new());
@@ -80,7 +86,23 @@ async fn a_bounded_soak_keeps_the_farm_up() {
         "--batch-seconds",
         "0.2",
     ];
-    let (mut coordinator, url) = support::serve(&data, "127.0.0.1:0", &flags, &[("PHOTONFARM_TOKEN", TOKEN)]);
+    // A fixed port, so that the worker finds the coordinator again after the SIGKILL.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let bind = format!("127.0.0.1:{port}");
+    let serve = || {
+        support::serve_limited(
+            &data,
+            &bind,
+            &flags,
+            &[("PHOTONFARM_TOKEN", TOKEN)],
+            Some(ADDRESS_SPACE_MB),
+        )
+    };
+    let (mut coordinator, url) = serve();
     let pid = coordinator.0.id();
     let addr = url.strip_prefix("http://").unwrap().to_string();
     let (fds_at_start, _) = usage(pid);
@@ -145,7 +167,23 @@ async fn a_bounded_soak_keeps_the_farm_up() {
     let mut accepted = Vec::new();
     let mut refused = 0;
     let mut round = 0;
+    let mut killed = false;
+    let mut pid = pid;
     while Instant::now() < deadline {
+        // A SIGKILL in the middle of it all: the coordinator restarts on the same data and
+        // port, loses no job, and the worker and the clients go on with it.
+        if !killed && deadline - Instant::now() < Duration::from_secs(6) {
+            coordinator.sigkill();
+            let (restarted, again) = serve();
+            assert_eq!(again, url);
+            coordinator = restarted;
+            pid = coordinator.0.id();
+            killed = true;
+            eprintln!(
+                "killed and restarted the coordinator after {} accepted jobs",
+                accepted.len()
+            );
+        }
         let (s, v) = submit(
             &http,
             &url,
@@ -217,9 +255,40 @@ async fn a_bounded_soak_keeps_the_farm_up() {
     assert!(fds <= fds_at_start + 40, "{fds} descriptors");
     assert!(hwm_kib < 512 * 1024, "peak RSS {} MiB", hwm_kib / 1024);
 
+    // A good job's image has the bytes of a local render of the same scene and settings.
+    let local = dir.path().join("local.exr");
+    let scene_file = dir.path().join("s.xml");
+    std::fs::write(&scene_file, scene(16)).unwrap();
+    let o = std::process::Command::new(support::coordinator_bin())
+        .args([
+            "render",
+            scene_file.to_str().unwrap(),
+            "--spp",
+            "4",
+            "--out",
+            local.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let last = *accepted.last().unwrap();
+    let farm = http
+        .get(format!("{url}/api/jobs/{last}/image.exr"))
+        .bearer_auth(TOKEN)
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap();
+    assert!(
+        farm.as_ref() == std::fs::read(&local).unwrap().as_slice(),
+        "farm and local bytes differ"
+    );
+
     // And it restarts cleanly, with every job.
     coordinator.sigkill();
-    let (_coordinator, url) = support::serve(&data, "127.0.0.1:0", &flags, &[("PHOTONFARM_TOKEN", TOKEN)]);
+    let (_coordinator, url) = serve();
     let v: Value = http
         .get(format!("{url}/api/jobs"))
         .bearer_auth(TOKEN)

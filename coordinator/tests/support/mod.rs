@@ -46,7 +46,29 @@ pub fn cbox_spheres() -> PathBuf {
 
 /// Starts `coordinator serve` with extra flags and environment; returns it and its URL.
 pub fn serve(data: &Path, bind: &str, extra: &[&str], env: &[(&str, &str)]) -> (Proc, String) {
-    let mut child = Command::new(coordinator_bin())
+    serve_limited(data, bind, extra, env, None)
+}
+
+/// [`serve`] with the operating system capping the coordinator's address space at
+/// `address_space_mb` (util-linux's `prlimit --as`): past it, allocations fail.
+pub fn serve_limited(
+    data: &Path,
+    bind: &str,
+    extra: &[&str],
+    env: &[(&str, &str)],
+    address_space_mb: Option<u64>,
+) -> (Proc, String) {
+    let mut command = match address_space_mb {
+        Some(mb) => {
+            let mut c = Command::new("prlimit");
+            c.arg(format!("--as={}", mb << 20))
+                .arg("--")
+                .arg(coordinator_bin());
+            c
+        }
+        None => Command::new(coordinator_bin()),
+    };
+    let mut child = command
         .args(["serve", "--bind", bind, "--data", data.to_str().unwrap()])
         .args(extra)
         .envs(env.iter().copied())
