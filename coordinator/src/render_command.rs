@@ -102,8 +102,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let mut reporter = Reporter::new(resolved.passes, unit);
     let mut checkpoint_error = None;
     let now = || start.elapsed().as_millis() as u64;
+    let interrupted = interruption_flag();
     loop {
-        if limit.is_some_and(|l| start.elapsed() >= l) {
+        let stop = interrupted.load(std::sync::atomic::Ordering::Relaxed);
+        if stop || limit.is_some_and(|l| start.elapsed() >= l) {
             scheduler.close(0);
         }
         let Some(grant) = scheduler.lease("local", now()) else {
@@ -157,7 +159,32 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         film.passes,
         start.elapsed().as_secs_f64()
     );
+    if interrupted.load(std::sync::atomic::Ordering::Relaxed) {
+        let of = resolved.passes.map(|n| format!(" of {n}")).unwrap_or_default();
+        bail!(
+            "interrupted: {} wholly holds the {} finished {unit}{of}",
+            args.out.display(),
+            film.passes
+        );
+    }
     Ok(())
+}
+
+/// Set on ctrl-c or SIGTERM: the render stops after the batch under way (at most about half a
+/// second of work) and writes the image of every finished pass, so an interruption keeps the
+/// work done.
+fn interruption_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let set = flag.clone();
+    std::thread::spawn(move || {
+        let Ok(rt) = tokio::runtime::Builder::new_current_thread().enable_all().build() else {
+            return;
+        };
+        rt.block_on(photonfarm::process::shutdown_signal());
+        eprintln!("\ninterrupted: finishing the batch under way, then writing the image");
+        set.store(true, std::sync::atomic::Ordering::Relaxed);
+    });
+    flag
 }
 
 /// `out.exr` → `out-000256.exr`, beside it.

@@ -272,3 +272,61 @@ fn oversized_jobs_are_clear_errors_not_aborts() {
         assert!(err.contains(needle), "{err}");
     }
 }
+
+/// Ctrl-c (SIGINT) keeps the work done: the render stops after the batch under way, writes the
+/// image of every finished pass, says how many, exits non-zero, and the image has the bytes of
+/// a render of exactly that many passes.
+#[test]
+fn sigint_writes_the_finished_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = refs().join("cbox.xml");
+    let out = dir.path().join("interrupted.exr");
+    let child = coordinator()
+        .args([
+            "render",
+            scene.to_str().unwrap(),
+            "-D",
+            "res=24",
+            "--spp",
+            "1000000",
+        ])
+        .args(["--threads", "1", "--out", out.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "an interrupted render is not a finished one: {err}"
+    );
+    let passes: u64 = err
+        .split("holds the ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no pass count in: {err}"));
+    assert!(passes > 0, "{err}");
+    let again = dir.path().join("again.exr");
+    let o = run(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-D",
+        "res=24",
+        "--spp",
+        &passes.to_string(),
+        "--out",
+        again.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(&out).unwrap() == std::fs::read(&again).unwrap(),
+        "the interrupted image is not the image of its {passes} passes"
+    );
+}
