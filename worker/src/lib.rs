@@ -78,8 +78,9 @@ pub async fn run(
             .build()
             .context("cannot start the render threads")?,
     );
+    let base = coordinator_url(&config.coordinator)?;
     let client = Arc::new(Client {
-        base: config.coordinator.trim_end_matches('/').to_string(),
+        base,
         token: config.token.clone(),
         http: reqwest::Client::builder()
             .timeout(Duration::from_secs(300))
@@ -88,14 +89,27 @@ pub async fn run(
     let mut scenes = SceneCache::new();
     let mut backoff = Duration::from_millis(200);
     tracing::info!(name = %config.name, threads = config.threads, coordinator = %client.base, "worker started");
+    let mut trouble = Trouble::default();
     while !*stop_rx.borrow() {
         let lease = match request_lease(&client, &config).await {
             Ok(Some(lease)) => {
+                trouble.cleared(&client.base);
                 backoff = Duration::from_millis(200);
                 lease
             }
-            Ok(None) | Err(_) => {
-                // No work, or the coordinator is away (restarting): wait and ask again.
+            Ok(None) => {
+                trouble.cleared(&client.base);
+                tokio::select! {
+                    _ = tokio::time::sleep(backoff) => {}
+                    _ = stop_rx.changed() => {}
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(2));
+                continue;
+            }
+            Err(e) => {
+                // The coordinator is away (restarting, or a wrong address) or refuses us: say so
+                // at once, then now and then; give up only on a token refused again and again.
+                trouble.failed(&client.base, &e)?;
                 tokio::select! {
                     _ = tokio::time::sleep(backoff) => {}
                     _ = stop_rx.changed() => {}
@@ -123,7 +137,97 @@ pub async fn run(
     Ok(())
 }
 
-async fn request_lease(client: &Client, config: &WorkerConfig) -> anyhow::Result<Option<Lease>> {
+/// Why asking for work failed.
+#[derive(Debug, thiserror::Error)]
+enum LeaseError {
+    /// No answer: the coordinator is down, restarting or not at that address.
+    #[error("cannot reach the coordinator: {0}")]
+    Unreachable(String),
+    /// The token was refused (401 or 403).
+    #[error("the coordinator refused this worker's token ({0}): check --token / PHOTONFARM_TOKEN")]
+    Refused(reqwest::StatusCode),
+    /// Any other refusal.
+    #[error("lease request refused: {0} {1}")]
+    Other(reqwest::StatusCode, String),
+}
+
+/// The worker stopped because the coordinator refused its token: `worker` exits with
+/// [`TokenRefused::EXIT_CODE`], so that a supervisor can tell it from a crash.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct TokenRefused(String);
+
+impl TokenRefused {
+    /// The process exit code for a refused token.
+    pub const EXIT_CODE: u8 = 3;
+}
+
+/// A token refused this many times in a row ends the worker: it will not start working by
+/// itself, and a worker that retries forever hides the mistake.
+const MAX_REFUSALS: u32 = 5;
+/// How often a failure that goes on is logged again.
+const REPEAT_LOG: Duration = Duration::from_secs(30);
+
+/// What the worker has told the operator about failing lease requests.
+#[derive(Default)]
+struct Trouble {
+    refusals: u32,
+    last_logged: Option<std::time::Instant>,
+    failing_since: Option<std::time::Instant>,
+}
+
+impl Trouble {
+    /// A failed request: logged at once, then every [`REPEAT_LOG`]; an error ends the worker.
+    fn failed(&mut self, url: &str, e: &LeaseError) -> anyhow::Result<()> {
+        let now = std::time::Instant::now();
+        self.failing_since.get_or_insert(now);
+        self.refusals = if matches!(e, LeaseError::Refused(_)) {
+            self.refusals + 1
+        } else {
+            0
+        };
+        if self.refusals >= MAX_REFUSALS {
+            return Err(TokenRefused(format!(
+                "{e} ({MAX_REFUSALS} times in a row from {url}); stopping"
+            ))
+            .into());
+        }
+        if self.last_logged.is_none_or(|t| now - t >= REPEAT_LOG) {
+            let since = now - *self.failing_since.get_or_insert(now);
+            tracing::error!(coordinator = url, failing_for_s = since.as_secs(), "{e}");
+            self.last_logged = Some(now);
+        }
+        Ok(())
+    }
+
+    /// A request that worked: says so if it had been failing.
+    fn cleared(&mut self, url: &str) {
+        if let Some(since) = self.failing_since.take() {
+            tracing::info!(
+                coordinator = url,
+                "the coordinator answers again after {:.0} s",
+                since.elapsed().as_secs_f64()
+            );
+        }
+        *self = Trouble::default();
+    }
+}
+
+/// The coordinator's base URL, checked before anything is sent: an address without `http://`
+/// or `https://` would otherwise fail every request with an obscure message.
+fn coordinator_url(given: &str) -> anyhow::Result<String> {
+    let url = reqwest::Url::parse(given).with_context(|| {
+        format!("--coordinator {given}: not a URL (expected e.g. http://render-host:8080)")
+    })?;
+    if !matches!(url.scheme(), "http" | "https") || url.host().is_none() {
+        bail!(
+            "--coordinator {given}: expected an http:// or https:// address with a host, e.g. http://render-host:8080"
+        );
+    }
+    Ok(given.trim_end_matches('/').to_string())
+}
+
+async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<Lease>, LeaseError> {
     let req = LeaseRequest {
         worker: config.name.clone(),
         threads: config.threads as u32,
@@ -132,16 +236,32 @@ async fn request_lease(client: &Client, config: &WorkerConfig) -> anyhow::Result
         .req(reqwest::Method::POST, "/api/lease")
         .json(&req)
         .send()
-        .await?;
+        .await
+        .map_err(|e| LeaseError::Unreachable(error_chain(&e)))?;
     match resp.status() {
         reqwest::StatusCode::NO_CONTENT => Ok(None),
-        s if s.is_success() => Ok(Some(resp.json().await?)),
-        s => {
-            let text = resp.text().await.unwrap_or_default();
-            tracing::warn!("lease request refused: {s} {text}");
-            bail!("lease request refused: {s}")
+        s if s.is_success() => {
+            Ok(Some(resp.json().await.map_err(|e| {
+                LeaseError::Other(s, format!("unreadable lease: {e}"))
+            })?))
         }
+        s @ (reqwest::StatusCode::UNAUTHORIZED | reqwest::StatusCode::FORBIDDEN) => {
+            Err(LeaseError::Refused(s))
+        }
+        s => Err(LeaseError::Other(s, resp.text().await.unwrap_or_default())),
     }
+}
+
+/// An error and its causes on one line ("error sending request: connection refused").
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut out = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        out.push_str(": ");
+        out.push_str(&c.to_string());
+        cause = c.source();
+    }
+    out
 }
 
 /// Loads (or reuses) the lease's scene, renders the batch with heartbeats, uploads the result.

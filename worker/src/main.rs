@@ -10,7 +10,9 @@ use clap::Parser;
 #[derive(Debug, Parser)]
 #[command(version, about)]
 struct Args {
-    /// The coordinator's URL, e.g. http://render-host:8080.
+    /// The coordinator's URL, e.g. http://render-host:8080. An unreachable coordinator is
+    /// logged at once and every 30 s while the worker keeps asking; a token refused 5 times in
+    /// a row ends the worker with exit code 3.
     #[arg(long)]
     coordinator: String,
     /// Render threads (default: one per core).
@@ -73,7 +75,11 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            if e.downcast_ref::<worker::TokenRefused>().is_some() {
+                ExitCode::from(worker::TokenRefused::EXIT_CODE)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }
