@@ -26,9 +26,100 @@ pub enum Command {
     Submit(SubmitArgs),
     /// Chart error against render time for several methods or settings.
     Converge(ConvergeArgs),
+    /// A farm's jobs, one line each.
+    Jobs(JobsArgs),
+    /// One job's state, progress, rate, time left and workers.
+    Status(JobIdArgs),
+    /// Follow a job with a progress bar until it ends (and download its image with --out).
+    Wait(WaitArgs),
+    /// Download a job's latest image.
+    Fetch(FetchArgs),
+    /// Cancel a job.
+    Cancel(JobIdArgs),
     /// The service's scene checker (run by `serve` in a child process).
     #[command(hide = true)]
     CheckScene(CheckSceneArgs),
+}
+
+/// Where the coordinator is, for the job commands.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ConnectionArgs {
+    /// The coordinator's URL, e.g. http://render-host:8080.
+    #[arg(long)]
+    pub to: String,
+    /// Bearer token, if the coordinator requires one.
+    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+}
+
+/// `coordinator jobs`.
+#[derive(Debug, clap::Args)]
+pub struct JobsArgs {
+    /// The coordinator.
+    #[command(flatten)]
+    pub conn: ConnectionArgs,
+}
+
+/// `coordinator status ID` and `cancel ID`.
+#[derive(Debug, clap::Args)]
+pub struct JobIdArgs {
+    /// The job's id (printed by `submit`, listed by `jobs`).
+    pub id: u64,
+    /// The coordinator.
+    #[command(flatten)]
+    pub conn: ConnectionArgs,
+}
+
+/// `coordinator wait ID`.
+#[derive(Debug, clap::Args)]
+pub struct WaitArgs {
+    /// The job's id.
+    pub id: u64,
+    /// Download the final image here (.exr or .png).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The coordinator.
+    #[command(flatten)]
+    pub conn: ConnectionArgs,
+}
+
+/// `coordinator fetch ID --out FILE`.
+#[derive(Debug, clap::Args)]
+pub struct FetchArgs {
+    /// The job's id.
+    pub id: u64,
+    /// Where to write the latest image (.exr or .png).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The coordinator.
+    #[command(flatten)]
+    pub conn: ConnectionArgs,
+}
+
+/// The job commands, for the one function that runs them.
+pub enum JobCommand<'a> {
+    /// `jobs`.
+    Jobs(&'a JobsArgs),
+    /// `status`.
+    Status(&'a JobIdArgs),
+    /// `wait`.
+    Wait(&'a WaitArgs),
+    /// `fetch`.
+    Fetch(&'a FetchArgs),
+    /// `cancel`.
+    Cancel(&'a JobIdArgs),
+}
+
+impl JobCommand<'_> {
+    /// The coordinator the command talks to.
+    pub fn connection(&self) -> &ConnectionArgs {
+        match self {
+            JobCommand::Jobs(a) => &a.conn,
+            JobCommand::Status(a) | JobCommand::Cancel(a) => &a.conn,
+            JobCommand::Wait(a) => &a.conn,
+            JobCommand::Fetch(a) => &a.conn,
+        }
+    }
 }
 
 /// `coordinator check-scene` (internal).
@@ -343,6 +434,11 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Serve(args) => crate::serve_command::run(args),
         Command::Submit(args) => crate::client::run_submit(&args),
         Command::Converge(args) => crate::converge::run(&args),
+        Command::Jobs(c) => crate::client::run_job_command(&JobCommand::Jobs(&c)),
+        Command::Status(a) => crate::client::run_job_command(&JobCommand::Status(&a)),
+        Command::Wait(a) => crate::client::run_job_command(&JobCommand::Wait(&a)),
+        Command::Fetch(a) => crate::client::run_job_command(&JobCommand::Fetch(&a)),
+        Command::Cancel(a) => crate::client::run_job_command(&JobCommand::Cancel(&a)),
         Command::CheckScene(args) => {
             crate::scene_check::run_child(&args.scene, &args.root, &args.settings, &args.out)
         }

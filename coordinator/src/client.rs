@@ -1,4 +1,5 @@
-//! `coordinator submit`: the API's client.
+//! The API's client: `coordinator submit`, and the job commands (`jobs`, `status`, `wait`,
+//! `fetch`, `cancel`) that follow a job after it was submitted.
 
 use std::time::{Duration, Instant};
 
@@ -81,6 +82,25 @@ impl ApiClient {
             .await?)
     }
 
+    /// Every job's status JSON, oldest first.
+    pub async fn jobs(&self) -> anyhow::Result<Vec<Value>> {
+        let v: Value = self
+            .send(self.req(reqwest::Method::GET, "/api/jobs"))
+            .await?
+            .json()
+            .await?;
+        Ok(v["jobs"].as_array().cloned().unwrap_or_default())
+    }
+
+    /// Cancels a job; returns its status JSON.
+    pub async fn cancel(&self, id: u64) -> anyhow::Result<Value> {
+        Ok(self
+            .send(self.req(reqwest::Method::DELETE, &format!("/api/jobs/{id}")))
+            .await?
+            .json()
+            .await?)
+    }
+
     /// A job's latest image, `image.exr` or `image.png`.
     pub async fn image(&self, id: u64, file: &str) -> anyhow::Result<Vec<u8>> {
         Ok(self
@@ -117,35 +137,139 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
         if !args.wait {
             return Ok(());
         }
-        let total = job["iterations_total"].as_u64();
-        let mut reporter = Reporter::new(total, "passes");
-        let start = Instant::now();
-        let status = loop {
-            let s = client.status(id).await?;
-            reporter.update(s["iterations_done"].as_u64().unwrap_or(0), total, start.elapsed());
-            match s["state"].as_str() {
-                Some("done" | "failed" | "cancelled") => break s,
-                _ => tokio::time::sleep(Duration::from_millis(500)).await,
-            }
-        };
-        reporter.finish();
-        match status["state"].as_str() {
-            Some("done") => {}
-            Some(state) => bail!(
-                "job {id} {state}: {}",
-                status["message"].as_str().unwrap_or("no message")
-            ),
-            None => bail!("job {id}: the coordinator's answer has no state"),
-        }
+        wait_for(&client, id).await?;
         if let Some(out) = &args.out {
-            let ext = out
-                .extension()
-                .and_then(|e| e.to_str())
-                .unwrap_or("exr")
-                .to_ascii_lowercase();
-            let bytes = client.image(id, &format!("image.{ext}")).await?;
-            std::fs::write(out, bytes).with_context(|| format!("cannot write {}", out.display()))?;
-            eprintln!("wrote {}", out.display());
+            fetch(&client, id, out).await?;
+        }
+        Ok(())
+    })
+}
+
+/// Follows a job with a progress bar until it ends; an error unless it is done. While it is
+/// queued and no worker has asked for work, says so instead of an endless estimate.
+pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let mut reporter: Option<Reporter> = None;
+    let mut said_idle = false;
+    let status = loop {
+        let s = client.status(id).await?;
+        let state = s["state"].as_str().unwrap_or_default();
+        if matches!(state, "done" | "failed" | "cancelled") {
+            break s;
+        }
+        if state == "queued" && s["workers_present"].as_u64() == Some(0) {
+            if !said_idle {
+                eprintln!(
+                    "job {id} is queued: no worker has asked for work (start one with `worker --coordinator URL`)"
+                );
+                said_idle = true;
+            }
+        } else {
+            let total = s["iterations_total"].as_u64();
+            reporter
+                .get_or_insert_with(|| Reporter::new(total, "passes"))
+                .update(s["iterations_done"].as_u64().unwrap_or(0), total, start.elapsed());
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    };
+    if let Some(r) = reporter.as_mut() {
+        r.finish();
+    }
+    match status["state"].as_str() {
+        Some("done") => Ok(()),
+        Some(state) => bail!(
+            "job {id} {state}: {}",
+            status["message"].as_str().unwrap_or("no message")
+        ),
+        None => bail!("job {id}: the coordinator's answer has no state"),
+    }
+}
+
+/// Downloads a job's latest image to `out` (EXR or PNG by its extension).
+pub async fn fetch(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow::Result<()> {
+    check_output(out)?;
+    let ext = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("exr")
+        .to_ascii_lowercase();
+    let bytes = client.image(id, &format!("image.{ext}")).await?;
+    std::fs::write(out, bytes).with_context(|| format!("cannot write {}", out.display()))?;
+    eprintln!("wrote {}", out.display());
+    Ok(())
+}
+
+/// One line about a job: id, state, progress, rate, time left, workers.
+pub fn describe(s: &Value) -> String {
+    let (done, total) = (
+        s["iterations_done"].as_u64().unwrap_or(0),
+        s["iterations_total"].as_u64().unwrap_or(0),
+    );
+    let state = s["state"].as_str().unwrap_or("?");
+    let rate = s["rate"].as_f64().unwrap_or(0.0);
+    let mut line = format!(
+        "job {}: {state}, {done}/{total} passes ({:.1}%), {}x{} {}",
+        s["id"],
+        100.0 * done as f64 / total.max(1) as f64,
+        s["width"],
+        s["height"],
+        s["integrator"].as_str().unwrap_or("?")
+    );
+    match state {
+        "queued" if s["workers_present"].as_u64() == Some(0) => {
+            line.push_str(": no worker has asked for work");
+        }
+        "running" if rate > 0.0 => {
+            line.push_str(&format!(
+                ", {rate:.1} passes/s, {:.0} s left",
+                total.saturating_sub(done) as f64 / rate
+            ));
+        }
+        "failed" | "cancelled" => {
+            if let Some(m) = s["message"].as_str() {
+                line.push_str(&format!(": {m}"));
+            }
+        }
+        _ => {}
+    }
+    let workers: Vec<&str> = s["workers"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+        .collect();
+    if !workers.is_empty() {
+        line.push_str(&format!(", workers: {}", workers.join(", ")));
+    }
+    line
+}
+
+/// `coordinator jobs|status|wait|fetch|cancel`.
+pub fn run_job_command(command: &crate::cli::JobCommand) -> anyhow::Result<()> {
+    use crate::cli::JobCommand;
+    let conn = command.connection();
+    let client = ApiClient::new(&conn.to, conn.token.clone().filter(|t| !t.is_empty()));
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        match command {
+            JobCommand::Jobs(_) => {
+                let jobs = client.jobs().await?;
+                if jobs.is_empty() {
+                    eprintln!("no jobs");
+                }
+                for j in jobs {
+                    println!("{}", describe(&j));
+                }
+            }
+            JobCommand::Status(a) => println!("{}", describe(&client.status(a.id).await?)),
+            JobCommand::Wait(a) => {
+                wait_for(&client, a.id).await?;
+                if let Some(out) = &a.out {
+                    fetch(&client, a.id, out).await?;
+                }
+            }
+            JobCommand::Fetch(a) => fetch(&client, a.id, &a.out).await?,
+            JobCommand::Cancel(a) => println!("{}", describe(&client.cancel(a.id).await?)),
         }
         Ok(())
     })

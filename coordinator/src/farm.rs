@@ -81,6 +81,9 @@ pub struct JobStatus {
     pub checkpoint_iterations: u64,
     /// Workers holding a batch of this job now.
     pub workers: Vec<String>,
+    /// Workers that asked the coordinator for work recently, on any job: 0 says why a queued
+    /// job does not start.
+    pub workers_present: usize,
     /// Seconds since the first batch was handed out.
     pub elapsed_seconds: f64,
     /// Passes per second since then.
@@ -522,6 +525,7 @@ impl Farm {
             iterations_total: total,
             checkpoint_iterations: job.image_passes,
             workers: self.scheduler.workers_on(id),
+            workers_present: self.scheduler.workers_present(),
             elapsed_seconds: elapsed,
             rate,
             integrator: match job.render.method {

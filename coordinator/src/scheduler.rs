@@ -170,6 +170,12 @@ impl Scheduler {
         }
     }
 
+    /// How many workers asked for work recently (within two lease timeouts of their last
+    /// request, as of the latest request).
+    pub fn workers_present(&self) -> usize {
+        self.seen.len()
+    }
+
     /// The next lease id that will be granted.
     pub fn next_lease_id(&self) -> u64 {
         self.next_lease
