@@ -3,6 +3,8 @@
 
 mod support;
 
+use support::api::tar_of;
+
 use std::path::{Path, PathBuf};
 
 use reqwest::StatusCode;
@@ -22,18 +24,6 @@ fn serve(data: &Path) -> (support::Proc, String) {
 
 fn refs() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs")
-}
-
-fn tar_of(files: &[(&str, &[u8])]) -> Vec<u8> {
-    let mut b = tar::Builder::new(Vec::new());
-    for (name, data) in files {
-        let mut h = tar::Header::new_gnu();
-        h.set_size(data.len() as u64);
-        h.set_mode(0o644);
-        h.set_cksum();
-        b.append_data(&mut h, name, *data).unwrap();
-    }
-    b.into_inner().unwrap()
 }
 
 /// A tar whose single entry is named `name` verbatim (the tar crate refuses to write "..").

@@ -6,6 +6,8 @@
 
 mod support;
 
+use support::api::tar_of;
+
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
@@ -19,18 +21,6 @@ const TOKEN: &str = "soak-token";
 /// The coordinator's address-space cap (virtual memory: thread stacks and allocator arenas
 /// count, so it is well above the resident peak asserted below).
 const ADDRESS_SPACE_MB: u64 = 2048;
-
-fn tar_of(files: &[(&str, &[u8])]) -> Vec<u8> {
-    let mut b = tar::Builder::new(Vec::new());
-    for (name, data) in files {
-        let mut h = tar::Header::new_gnu();
-        h.set_size(data.len() as u64);
-        h.set_mode(0o644);
-        h.set_cksum();
-        b.append_data(&mut h, name, *data).unwrap();
-    }
-    b.into_inner().unwrap()
-}
 
 fn scene(width: u32) -> Vec<u8> {
     format!(

@@ -1,6 +1,8 @@
 //! Starting the real programs for the farm's tests and benchmark.
 #![allow(dead_code)]
 
+pub mod api;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
