@@ -403,15 +403,12 @@ pub struct ServeArgs {
 /// `coordinator submit`.
 #[derive(Debug, clap::Args)]
 pub struct SubmitArgs {
-    /// The coordinator's URL, e.g. http://render-host:8080.
-    #[arg(long)]
-    pub to: String,
+    /// The coordinator.
+    #[command(flatten)]
+    pub conn: ConnectionArgs,
     /// What to render.
     #[command(flatten)]
     pub job: JobArgs,
-    /// Bearer token, if the coordinator requires one.
-    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
-    pub token: Option<String>,
     /// Wait for the job to finish, showing progress.
     #[arg(long)]
     pub wait: bool,

@@ -29,6 +29,11 @@ impl ApiClient {
         }
     }
 
+    /// A client of the coordinator named on the command line (an empty token is none).
+    pub fn for_connection(conn: &crate::cli::ConnectionArgs) -> ApiClient {
+        ApiClient::new(&conn.to, conn.token.clone().filter(|t| !t.is_empty()))
+    }
+
     fn req(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
         let r = self.http.request(method, format!("{}{path}", self.base));
         match &self.token {
@@ -122,7 +127,7 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
     let scene = Scene::load(&args.job.scene, &settings.defines)?;
     let (bundle, scene_in_bundle) = photonfarm::bundle::pack(&args.job.scene, &scene.files)?;
     let scene_name = scene_in_bundle.to_string_lossy().into_owned();
-    let client = ApiClient::new(&args.to, args.token.clone().filter(|t| !t.is_empty()));
+    let client = ApiClient::for_connection(&args.conn);
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let job = client.submit(bundle, &scene_name, &settings).await?;
@@ -248,7 +253,7 @@ pub fn describe(s: &Value) -> String {
 pub fn run_job_command(command: &crate::cli::JobCommand) -> anyhow::Result<()> {
     use crate::cli::JobCommand;
     let conn = command.connection();
-    let client = ApiClient::new(&conn.to, conn.token.clone().filter(|t| !t.is_empty()));
+    let client = ApiClient::for_connection(conn);
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         match command {
