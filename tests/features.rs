@@ -10,14 +10,10 @@
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
 
-use photonfarm_tests::{check_path_against_mitsuba, refs_dir};
+use photonfarm_tests::{check_path_against_mitsuba, mitsuba_mse};
 
 fn check(name: &str) {
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(refs_dir().join(format!("{name}.json"))).unwrap())
-            .unwrap();
-    let mitsuba = meta["mitsuba_mse_at_test_spp"]["median"].as_f64().unwrap();
-    let spp = meta["mitsuba_mse_at_test_spp"]["spp"].as_u64().unwrap();
+    let (spp, mitsuba) = mitsuba_mse(name);
     check_path_against_mitsuba(
         &format!("{name}.xml"),
         &format!("{name}.exr"),

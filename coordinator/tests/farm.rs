@@ -162,12 +162,7 @@ fn a_restarted_coordinator_resumes_the_job() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     // A fixed port, so the worker finds the coordinator again after the restart.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let bind = format!("127.0.0.1:{port}");
+    let bind = support::fixed_loopback_address();
     let flags = ["--batch-seconds", "0.3", "--lease-timeout", "2"];
     let (mut coordinator, url) = serve(&data, &bind, &flags);
     let _w = worker(&url, "w", dir.path());

@@ -77,12 +77,7 @@ async fn a_bounded_soak_keeps_the_farm_up() {
         "0.2",
     ];
     // A fixed port, so that the worker finds the coordinator again after the SIGKILL.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let bind = format!("127.0.0.1:{port}");
+    let bind = support::fixed_loopback_address();
     let serve = || {
         support::serve_limited(
             &data,

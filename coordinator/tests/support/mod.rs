@@ -25,6 +25,17 @@ impl Proc {
     }
 }
 
+/// A loopback address with a free port, for a coordinator that must come back on the same
+/// address after a restart (so its workers find it again).
+pub fn fixed_loopback_address() -> String {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    format!("127.0.0.1:{port}")
+}
+
 /// The coordinator binary.
 pub fn coordinator_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_coordinator"))
