@@ -305,6 +305,14 @@ pub struct RenderArgs {
     /// Worker threads (default: one per core). Does not change the image.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Continue an interrupted render from the sums saved beside OUT (`OUT.resume`); the result
+    /// is the bytes of an uninterrupted render. The scene and every setting that changes the
+    /// pixels must be the same; the pass count may be larger.
+    #[arg(long)]
+    pub resume: bool,
+    /// How often the exact sums are saved to `OUT.resume` while rendering [default: 30].
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub save_every: Option<f64>,
     /// Size limits (as for `coordinator serve`).
     #[command(flatten)]
     pub limits: LimitArgs,

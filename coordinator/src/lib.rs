@@ -13,6 +13,7 @@ pub mod converge;
 pub mod farm;
 pub mod progress;
 pub mod render_command;
+pub mod resume;
 pub mod scene_check;
 pub mod scheduler;
 pub mod serve_command;

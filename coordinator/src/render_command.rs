@@ -15,6 +15,7 @@ use photonfarm::scene::Scene;
 use crate::accumulator::Accumulator;
 use crate::cli::RenderArgs;
 use crate::progress::Reporter;
+use crate::resume;
 use crate::scheduler::{JobState, Scheduler, SchedulerConfig};
 
 /// Renders `args.job.scene` to `args.out`.
@@ -28,6 +29,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     }
     if args.threads == Some(0) {
         bail!("--threads must be at least 1");
+    }
+    let save_every = args.save_every.unwrap_or(30.0);
+    if !(save_every > 0.0 && save_every.is_finite()) {
+        bail!("--save-every must be a positive number of seconds, not {save_every}");
     }
     let settings = args.job.settings()?;
     let scene = Scene::load(&args.job.scene, &settings.defines)?;
@@ -95,8 +100,32 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     );
     let total = resolved.passes.unwrap_or(u64::MAX);
     let window = settings.checkpoint_every.unwrap_or(1 << 40);
-    scheduler.add_job(0, total, window, 0, &[], JobState::Queued);
-    let mut acc = Accumulator::new(FilmSum::new(scene.width(), scene.height()), window);
+    let fingerprint = resume::fingerprint(&args.job.scene, &scene, &settings.defines, &resolved.render)?;
+    let sums_path = resume::path_for(&args.out);
+    let prefix = if args.resume {
+        let sum = resume::load(&sums_path, &fingerprint, scene.width(), scene.height())?;
+        eprintln!(
+            "resuming from {} ({} {unit} done)",
+            sums_path.display(),
+            sum.passes
+        );
+        sum
+    } else {
+        if sums_path.exists() {
+            eprintln!(
+                "warning: starting afresh; {} (an earlier render's sums) will be replaced \
+                 (--resume continues it instead)",
+                sums_path.display()
+            );
+        }
+        FilmSum::new(scene.width(), scene.height())
+    };
+    let done = prefix.passes;
+    scheduler.add_job(0, total, window, done, &[(0, done)], JobState::Queued);
+    let mut acc = Accumulator::new(prefix, window);
+    let save_every = Duration::from_secs_f64(save_every);
+    let mut saved = Instant::now();
+    let mut save_error = None;
     let start = Instant::now();
     let limit = args.time_limit.map(Duration::from_secs_f64);
     let mut reporter = Reporter::new(resolved.passes, unit);
@@ -117,6 +146,13 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         let sum = pool.install(|| render_batch(&scene, &resolved.render, grant.start..grant.end, &radii));
         scheduler.complete(grant.lease_id, now())?;
         let (checkpoints, _) = acc.add(grant.start, sum)?;
+        if (saved.elapsed() >= save_every || !checkpoints.is_empty()) && save_error.is_none() {
+            // Keep rendering if this fails: the image may still be written.
+            if let Err(e) = resume::save(&sums_path, &fingerprint, acc.prefix()) {
+                save_error = Some(format!("{e:#}"));
+            }
+            saved = Instant::now();
+        }
         for cp in checkpoints {
             if cp.passes < total
                 && checkpoint_error.is_none()
@@ -145,7 +181,18 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if let Some(e) = checkpoint_error {
         eprintln!("warning: checkpoints stopped: {e}");
     }
+    if let Some(e) = save_error {
+        eprintln!("warning: the sums for --resume were not saved: {e}");
+    }
     film.write(&args.out)?;
+    // A render that reached its pass count needs no sums; one that stopped early keeps them for
+    // --resume.
+    let finished = film.passes >= total;
+    if finished {
+        let _ = std::fs::remove_file(&sums_path);
+    } else {
+        resume::save(&sums_path, &fingerprint, film)?;
+    }
     if settings
         .checkpoint_every
         .is_some_and(|n| film.passes.is_multiple_of(n))
@@ -162,9 +209,17 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if interrupted.load(std::sync::atomic::Ordering::Relaxed) {
         let of = resolved.passes.map(|n| format!(" of {n}")).unwrap_or_default();
         bail!(
-            "interrupted: {} wholly holds the {} finished {unit}{of}",
+            "interrupted: {} wholly holds the {} finished {unit}{of}; the same command with \
+             --resume continues from them",
             args.out.display(),
             film.passes
+        );
+    }
+    if !finished {
+        eprintln!(
+            "{} holds the exact sums: the same command with --resume (and a larger pass count \
+             or time limit) continues the render",
+            sums_path.display()
         );
     }
     Ok(())

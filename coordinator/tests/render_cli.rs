@@ -330,3 +330,70 @@ fn sigint_writes_the_finished_passes() {
         "the interrupted image is not the image of its {passes} passes"
     );
 }
+
+/// A render killed outright (SIGKILL: no chance to write anything) continues with `--resume`
+/// from the sums it saved while running, and ends with the bytes of one uninterrupted render;
+/// a changed scene setting is refused instead of mixed in.
+#[test]
+fn resume_after_sigkill_gives_the_uninterrupted_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = refs().join("cbox.xml");
+    let out = dir.path().join("resumed.exr");
+    let sums = dir.path().join("resumed.exr.resume");
+    let spp = "6000";
+    let render = |extra: &[&str], out: &std::path::Path| {
+        let mut c = coordinator();
+        c.args(["render", scene.to_str().unwrap(), "-D", "res=24", "--spp", spp])
+            .args(["--threads", "1", "--out", out.to_str().unwrap()])
+            .args(extra);
+        c
+    };
+    let mut child = render(&["--save-every", "0.2"], &out)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !sums.exists() {
+        assert!(start.elapsed().as_secs() < 60, "no sums saved within 60 s");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the render ended before it was killed"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!out.exists(), "a killed render wrote no image");
+
+    // Another scene setting is refused, and the sums stay.
+    let o = render(&["--resume"], &out)
+        .args(["--seed", "7"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("different scene or settings"), "{err}");
+    assert!(sums.exists());
+
+    let o = render(&["--resume"], &out).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let done: u64 = err
+        .split("resuming from ")
+        .nth(1)
+        .and_then(|rest| rest.split(" (").nth(1))
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no resumed pass count in: {err}"));
+    assert!(done > 0 && done < 6000, "resumed at {done}: {err}");
+    assert!(!sums.exists(), "a finished render leaves no sums behind");
+
+    let whole = dir.path().join("whole.exr");
+    let o = render(&[], &whole).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(&out).unwrap() == std::fs::read(&whole).unwrap(),
+        "the resumed render (killed after {done} passes) is not the uninterrupted one"
+    );
+}
