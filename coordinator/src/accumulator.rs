@@ -61,8 +61,8 @@ impl Accumulator {
             ));
         }
         if start < self.prefix.passes {
-            // Already merged (a result stored before a restart and uploaded again cannot
-            // happen, since leases do not survive restarts; this guards the invariant).
+            // Already merged. Cannot happen: a lease restored after a restart covers only
+            // passes not yet stored; this guards the invariant.
             return Ok((Vec::new(), false));
         }
         self.pending.insert(start, sum);

@@ -10,7 +10,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::hash::{BuildHasher, Hasher};
 use std::sync::{Arc, Mutex};
-use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use photonfarm::job::JobSettings;
 use photonfarm::limits::Limits;
@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use crate::accumulator::Accumulator;
 use crate::scheduler::{Grant, JobState, LeaseError, Scheduler, SchedulerConfig};
-use crate::store::{JobRow, Layout, Store, StoreError};
+use crate::store::{JobRow, JobStats, Layout, LeaseRow, Store, StoreError};
 
 /// Farm settings.
 #[derive(Clone, Copy, Debug)]
@@ -84,9 +84,10 @@ pub struct JobStatus {
     /// Workers that asked the coordinator for work recently, on any job: 0 says why a queued
     /// job does not start.
     pub workers_present: usize,
-    /// Seconds since the first batch was handed out.
+    /// Seconds a coordinator spent on the job since its first batch was handed out (time
+    /// while the coordinator was down does not count; restarts do not reset it).
     pub elapsed_seconds: f64,
-    /// Passes per second since then.
+    /// Passes per second over that time.
     pub rate: f64,
     /// `path` or `sppm`.
     pub integrator: &'static str,
@@ -98,9 +99,9 @@ pub struct JobStatus {
     pub message: Option<String>,
     /// When the job was submitted, Unix milliseconds.
     pub created_unix_ms: u64,
-    /// Batch results received since this coordinator started.
+    /// Batch results received (across coordinator restarts).
     pub batches_received: u64,
-    /// Bytes of batch results received since this coordinator started.
+    /// Bytes of batch results received (across coordinator restarts).
     pub bytes_received: u64,
 }
 
@@ -125,10 +126,31 @@ struct JobEntry {
     image_passes: u64,
     started: Option<Instant>,
     finished: Option<Instant>,
-    /// Passes already done when this process started (for an honest rate after a restart).
-    done_at_start: u64,
+    /// Counters as stored when this process started: elapsed time, batches and bytes go on
+    /// from them.
+    before: JobStats,
     batches_received: u64,
     bytes_received: u64,
+}
+
+impl JobEntry {
+    /// Time a coordinator spent on the job, this one and those before a restart.
+    fn elapsed(&self) -> Duration {
+        let now = match (self.started, self.finished) {
+            (Some(s), Some(f)) => f - s,
+            (Some(s), None) => s.elapsed(),
+            _ => Duration::ZERO,
+        };
+        Duration::from_millis(self.before.elapsed_ms) + now
+    }
+
+    fn stats(&self) -> JobStats {
+        JobStats {
+            elapsed_ms: self.elapsed().as_millis() as u64,
+            batches_received: self.batches_received,
+            bytes_received: self.bytes_received,
+        }
+    }
 }
 
 /// A result the caller may add to the job's sum: counted and recorded by [`Farm::commit`].
@@ -204,9 +226,7 @@ impl Farm {
                         store.update_job(id, row.next_start, r.state, None)?;
                     }
                     scheduler.add_job(id, row.total, row.window, r.next_start, &r.done, r.state);
-                    let mut entry = r.entry;
-                    entry.done_at_start = scheduler.status(id).map_or(0, |s| s.1);
-                    jobs.insert(id, entry);
+                    jobs.insert(id, r.entry);
                 }
                 Err(message) => {
                     tracing::error!(job = id, "cannot resume: {message}");
@@ -218,6 +238,33 @@ impl Farm {
                 }
             }
         }
+        // Leases granted before the restart: their workers may be rendering them, or holding
+        // a finished batch until the coordinator answers. Each gets one lease timeout from now
+        // (the grace period) to heartbeat or deliver, like any live lease.
+        let grace = config.scheduler.lease_timeout_ms;
+        let mut lease_keys = HashMap::new();
+        let mut stale = Vec::new();
+        for row in store.load_leases()? {
+            let grant = Grant {
+                lease_id: row.id,
+                job_id: row.job,
+                start: row.start,
+                end: row.end,
+            };
+            if scheduler.restore_lease(row.id, &grant, &row.worker, grace) {
+                lease_keys.insert(row.id, row.key);
+            } else {
+                stale.push(row.id);
+            }
+        }
+        store.delete_leases(&stale)?;
+        if !lease_keys.is_empty() {
+            tracing::info!(
+                leases = lease_keys.len(),
+                grace_ms = grace,
+                "restored the leases held before the restart"
+            );
+        }
         Ok(Farm {
             store,
             scheduler,
@@ -226,7 +273,7 @@ impl Farm {
             lease_timeout_ms: config.scheduler.lease_timeout_ms,
             heartbeat_ms: (config.scheduler.lease_timeout_ms / 4).max(10),
             default_checkpoint: config.default_checkpoint,
-            lease_keys: HashMap::new(),
+            lease_keys,
             key_source: std::collections::hash_map::RandomState::new(),
         })
     }
@@ -295,6 +342,7 @@ impl Farm {
             width,
             height,
             image_passes: 0,
+            stats: JobStats::default(),
         };
         self.jobs.insert(
             id,
@@ -327,6 +375,14 @@ impl Farm {
             return Ok(None);
         };
         self.lease_keys.insert(g.lease_id, key.clone());
+        self.store.insert_lease(&LeaseRow {
+            id: g.lease_id,
+            job: g.job_id,
+            start: g.start,
+            end: g.end,
+            worker: req.worker.clone(),
+            key: key.clone(),
+        })?;
         let job = self.jobs.get_mut(&g.job_id).expect("scheduled jobs are known");
         job.started.get_or_insert_with(Instant::now);
         let lease = Lease {
@@ -384,8 +440,7 @@ impl Farm {
     /// worker.
     pub fn reject(&mut self, lease_id: u64, why: &str) -> Result<(), FarmError> {
         self.scheduler.release(lease_id, Some(why))?;
-        self.lease_keys.remove(&lease_id);
-        Ok(())
+        self.forget_lease(lease_id)
     }
 
     /// Counts a result already stored durably (by [`Layout::write_batch`]): the lease ends,
@@ -395,8 +450,8 @@ impl Farm {
         self.check_key(lease_id, key)?;
         let now = self.now();
         let g: Grant = self.scheduler.complete(lease_id, now)?;
-        self.lease_keys.remove(&lease_id);
         self.store.record_batch(g.job_id, g.start, g.end)?;
+        self.forget_lease(lease_id)?;
         let job = self.jobs.get_mut(&g.job_id).expect("known");
         job.batches_received += 1;
         job.bytes_received += bytes;
@@ -445,7 +500,7 @@ impl Farm {
             .map(|g| g.job_id)
             .ok();
         self.scheduler.release(lease_id, error)?;
-        self.lease_keys.remove(&lease_id);
+        self.forget_lease(lease_id)?;
         if let Some(job) = job {
             self.persist_progress(job)?;
         }
@@ -462,10 +517,17 @@ impl Farm {
                 job,
                 "lease expired without a heartbeat; its passes will be re-issued"
             );
-            self.lease_keys.remove(&lease);
+            self.forget_lease(lease)?;
             self.persist_progress(job)?;
         }
         Ok(expired.len())
+    }
+
+    /// A lease ended: its secret and its stored row go.
+    fn forget_lease(&mut self, lease_id: u64) -> Result<(), FarmError> {
+        self.lease_keys.remove(&lease_id);
+        self.store.delete_leases(&[lease_id])?;
+        Ok(())
     }
 
     /// Cancels a job.
@@ -473,8 +535,15 @@ impl Farm {
         if !self.scheduler.cancel(id) {
             return Err(FarmError::NoJob(id));
         }
-        let scheduler = &self.scheduler;
-        self.lease_keys.retain(|&l, _| scheduler.is_live(l));
+        let void: Vec<u64> = self
+            .lease_keys
+            .keys()
+            .copied()
+            .filter(|&l| !self.scheduler.is_live(l))
+            .collect();
+        for lease in void {
+            self.forget_lease(lease)?;
+        }
         self.persist_progress(id)?;
         self.status(id).ok_or(FarmError::NoJob(id))
     }
@@ -501,6 +570,9 @@ impl Farm {
         }
         let next = self.scheduler.next_start(id).unwrap_or(0);
         self.store.update_job(id, next, state, message.as_deref())?;
+        if let Some(job) = self.jobs.get(&id) {
+            self.store.set_stats(id, job.stats())?;
+        }
         Ok(())
     }
 
@@ -508,16 +580,8 @@ impl Farm {
     pub fn status(&self, id: u64) -> Option<JobStatus> {
         let job = self.jobs.get(&id)?;
         let (state, done, total, message) = self.reported_state(id)?;
-        let elapsed = match (job.started, job.finished) {
-            (Some(s), Some(f)) => (f - s).as_secs_f64(),
-            (Some(s), None) => s.elapsed().as_secs_f64(),
-            _ => 0.0,
-        };
-        let rate = if elapsed > 0.0 {
-            (done - job.done_at_start.min(done)) as f64 / elapsed
-        } else {
-            0.0
-        };
+        let elapsed = job.elapsed().as_secs_f64();
+        let rate = if elapsed > 0.0 { done as f64 / elapsed } else { 0.0 };
         Some(JobStatus {
             id,
             state,
@@ -588,9 +652,9 @@ fn entry_of(
         image_passes: row.image_passes,
         started: None,
         finished: None,
-        done_at_start: 0,
-        batches_received: 0,
-        bytes_received: 0,
+        before: row.stats,
+        batches_received: row.stats.batches_received,
+        bytes_received: row.stats.bytes_received,
     }
 }
 

@@ -263,6 +263,45 @@ impl Scheduler {
         None
     }
 
+    /// Gives back a lease granted before a restart, with a fresh deadline: its worker may
+    /// still be rendering it, or may hold its result and be waiting for the coordinator to
+    /// answer. Refused (false) unless the job is still running and the range still waits to be
+    /// rendered.
+    pub fn restore_lease(&mut self, lease_id: u64, grant: &Grant, worker: &str, deadline: Millis) -> bool {
+        let Some(job) = self.jobs.get_mut(&grant.job_id) else {
+            return false;
+        };
+        if job.state.is_final() || self.leases.contains_key(&lease_id) {
+            return false;
+        }
+        let Some(&(s, e)) = job
+            .free
+            .iter()
+            .find(|&&(s, e)| s <= grant.start && grant.end <= e)
+        else {
+            return false;
+        };
+        job.free.remove(&(s, e));
+        for part in [(s, grant.start), (grant.end, e)] {
+            if part.0 < part.1 {
+                job.free.insert(part);
+            }
+        }
+        job.state = JobState::Running;
+        self.leases.insert(
+            lease_id,
+            LeaseInfo {
+                job: grant.job_id,
+                start: grant.start,
+                end: grant.end,
+                worker: worker.to_string(),
+                issued: deadline.saturating_sub(self.config.lease_timeout_ms),
+                deadline,
+            },
+        );
+        true
+    }
+
     /// Extends a live lease; returns its new deadline.
     pub fn heartbeat(&mut self, lease_id: u64, now: Millis) -> Result<Millis, LeaseError> {
         let lease = self
@@ -641,6 +680,38 @@ mod tests {
         let total: u64 = got.iter().map(|(a, b)| b - a).sum();
         assert_eq!(total, 20 - 6);
         assert_eq!(s.status(3).unwrap().0, JobState::Done);
+    }
+
+    #[test]
+    fn a_lease_from_before_a_restart_is_restored_once_and_only_on_waiting_passes() {
+        let mut s = sched();
+        // After a restart: passes [0, 8) were handed out, [0, 2) are done.
+        s.add_job(1, 20, 10, 8, &[(0, 2)], JobState::Running);
+        let g = |start, end| Grant {
+            lease_id: 0,
+            job_id: 1,
+            start,
+            end,
+        };
+        assert!(s.restore_lease(100, &g(4, 6), "w", 50));
+        assert!(!s.restore_lease(100, &g(4, 6), "w", 50), "once");
+        assert!(!s.restore_lease(101, &g(0, 2), "w", 50), "done already");
+        assert!(
+            !s.restore_lease(102, &g(5, 7), "w", 50),
+            "overlaps the restored one"
+        );
+        assert!(!s.restore_lease(103, &g(1, 1 << 40), "w", 50));
+        // The rest is handed out again, around the restored lease.
+        let mut handed = Vec::new();
+        while let Some(l) = s.lease("v", 0) {
+            handed.extend(l.start..l.end);
+            s.complete(l.lease_id, 1).unwrap();
+        }
+        handed.sort();
+        let expected: Vec<u64> = (2..4).chain(6..20).collect();
+        assert_eq!(handed, expected);
+        assert_eq!(s.complete(100, 10).unwrap().start, 4);
+        assert!(s.expire(51).is_empty());
     }
 
     #[test]

@@ -70,6 +70,38 @@ pub struct JobRow {
     pub height: u32,
     /// Passes in the latest checkpoint image.
     pub image_passes: u64,
+    /// What the job's status counts, kept across restarts.
+    pub stats: JobStats,
+}
+
+/// A job's counters, stored so that its elapsed time, rate and batch count go on after a
+/// restart instead of starting from zero.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct JobStats {
+    /// Milliseconds during which a coordinator ran the job (time while it was down not counted).
+    pub elapsed_ms: u64,
+    /// Batch results received.
+    pub batches_received: u64,
+    /// Bytes of batch results received.
+    pub bytes_received: u64,
+}
+
+/// A lease as stored: a batch a worker holds survives a coordinator restart, so that a worker
+/// which finishes it while the coordinator is down can still deliver it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LeaseRow {
+    /// Lease id.
+    pub id: u64,
+    /// Job.
+    pub job: u64,
+    /// First pass.
+    pub start: u64,
+    /// One past the last.
+    pub end: u64,
+    /// The worker's name.
+    pub worker: String,
+    /// The lease's secret.
+    pub key: String,
 }
 
 /// Where everything lives under the data folder: paths only, so it is cheap to clone and
@@ -213,14 +245,19 @@ impl Store {
                  state TEXT NOT NULL, message TEXT, width INTEGER NOT NULL, height INTEGER NOT NULL);
              CREATE TABLE IF NOT EXISTS batches (
                  job INTEGER NOT NULL, start INTEGER NOT NULL, end INTEGER NOT NULL,
-                 PRIMARY KEY (job, start));",
+                 PRIMARY KEY (job, start));
+             CREATE TABLE IF NOT EXISTS leases (
+                 id INTEGER PRIMARY KEY, job INTEGER NOT NULL, start INTEGER NOT NULL,
+                 end INTEGER NOT NULL, worker TEXT NOT NULL, key TEXT NOT NULL);",
         )?;
-        // Passes in each job's latest image (added after the first release; an error means
-        // the column is there already).
-        let _ = db.execute(
-            "ALTER TABLE jobs ADD COLUMN image_passes INTEGER NOT NULL DEFAULT 0",
-            [],
-        );
+        // Columns added after the first release (an error means the column is there already):
+        // passes in each job's latest image, and its counters.
+        for column in ["image_passes", "elapsed_ms", "batches_received", "bytes_received"] {
+            let _ = db.execute(
+                &format!("ALTER TABLE jobs ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0"),
+                [],
+            );
+        }
         // Scratch folders of submissions a crash interrupted: nothing refers to them.
         if let Ok(entries) = std::fs::read_dir(dir.join("bundles")) {
             for e in entries.flatten() {
@@ -319,6 +356,63 @@ impl Store {
         Ok(())
     }
 
+    /// Records a job's counters.
+    pub fn set_stats(&mut self, id: u64, stats: JobStats) -> Result<(), StoreError> {
+        self.db.execute(
+            "UPDATE jobs SET elapsed_ms = ?2, batches_received = ?3, bytes_received = ?4 WHERE id = ?1",
+            params![
+                id as i64,
+                stats.elapsed_ms as i64,
+                stats.batches_received as i64,
+                stats.bytes_received as i64
+            ],
+        )?;
+        Ok(())
+    }
+
+    /// Records a granted lease.
+    pub fn insert_lease(&mut self, lease: &LeaseRow) -> Result<(), StoreError> {
+        self.db.execute(
+            "INSERT OR REPLACE INTO leases (id, job, start, end, worker, key) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+            params![
+                lease.id as i64,
+                lease.job as i64,
+                lease.start as i64,
+                lease.end as i64,
+                lease.worker,
+                lease.key
+            ],
+        )?;
+        Ok(())
+    }
+
+    /// Forgets leases that ended (completed, released, expired, or of a job that is over).
+    pub fn delete_leases(&mut self, ids: &[u64]) -> Result<(), StoreError> {
+        for id in ids {
+            self.db
+                .execute("DELETE FROM leases WHERE id = ?1", params![*id as i64])?;
+        }
+        Ok(())
+    }
+
+    /// Every stored lease.
+    pub fn load_leases(&self) -> Result<Vec<LeaseRow>, StoreError> {
+        let mut stmt = self
+            .db
+            .prepare("SELECT id, job, start, end, worker, key FROM leases ORDER BY id")?;
+        let rows = stmt.query_map([], |r| {
+            Ok(LeaseRow {
+                id: r.get::<_, i64>(0)? as u64,
+                job: r.get::<_, i64>(1)? as u64,
+                start: r.get::<_, i64>(2)? as u64,
+                end: r.get::<_, i64>(3)? as u64,
+                worker: r.get(4)?,
+                key: r.get(5)?,
+            })
+        })?;
+        Ok(rows.collect::<Result<_, _>>()?)
+    }
+
     /// Records the pass count of a job's latest image.
     pub fn set_image_passes(&mut self, id: u64, passes: u64) -> Result<(), StoreError> {
         self.db.execute(
@@ -332,7 +426,8 @@ impl Store {
     pub fn load_jobs(&self) -> Result<Vec<JobRow>, StoreError> {
         let mut stmt = self.db.prepare(
             "SELECT id, created_ms, settings, render, scene, bundle, total, window, next_start, state, message,
-                    width, height, image_passes FROM jobs ORDER BY id",
+                    width, height, image_passes, elapsed_ms, batches_received, bytes_received
+             FROM jobs ORDER BY id",
         )?;
         let rows = stmt.query_map([], |r| {
             Ok(JobRow {
@@ -350,6 +445,11 @@ impl Store {
                 width: r.get(11)?,
                 height: r.get(12)?,
                 image_passes: r.get::<_, i64>(13)? as u64,
+                stats: JobStats {
+                    elapsed_ms: r.get::<_, i64>(14)? as u64,
+                    batches_received: r.get::<_, i64>(15)? as u64,
+                    bytes_received: r.get::<_, i64>(16)? as u64,
+                },
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)

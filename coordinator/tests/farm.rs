@@ -170,7 +170,8 @@ fn a_restarted_coordinator_resumes_the_job() {
     wait_until("some passes to arrive", Duration::from_secs(60), || {
         status(&url, id).is_some_and(|s| s["iterations_done"].as_u64().unwrap_or(0) >= 17)
     });
-    let before = status(&url, id).unwrap()["iterations_done"].as_u64().unwrap();
+    let seen = status(&url, id).unwrap();
+    let before = seen["iterations_done"].as_u64().unwrap();
     coordinator.sigkill();
     assert!(
         before < 40,
@@ -183,11 +184,90 @@ fn a_restarted_coordinator_resumes_the_job() {
         after["iterations_done"].as_u64().unwrap() >= before,
         "reported passes were lost: {after}"
     );
+    // The job's counters go on from where they were, not from zero.
+    assert!(
+        after["batches_received"].as_u64() >= seen["batches_received"].as_u64()
+            && seen["batches_received"].as_u64() > Some(0),
+        "batch count reset: {seen} then {after}"
+    );
+    assert!(
+        after["elapsed_seconds"].as_f64().unwrap() + 1.0 >= seen["elapsed_seconds"].as_f64().unwrap(),
+        "elapsed time reset: {seen} then {after}"
+    );
     let s = wait_done(&url, id);
     assert_eq!(s["iterations_done"], 40, "{s}");
     assert!(
         image(&url, id) == local_render(dir.path()),
         "bytes differ after a restart"
+    );
+}
+
+/// A worker that finishes its batch while the coordinator is down (killed, back 10 s later)
+/// keeps the result on disk, sends it again until the restarted coordinator answers, and the
+/// coordinator, which kept the lease, accepts it: nothing is rendered twice and the bytes are
+/// those of a local render.
+#[test]
+fn a_batch_finished_while_the_coordinator_is_down_is_delivered_after_its_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let bind = support::fixed_loopback_address();
+    let flags = ["--batch-seconds", "3", "--lease-timeout", "20"];
+    let (mut coordinator, url) = serve(&data, &bind, &flags);
+    let log = dir.path().join("worker.log");
+    let _w = support::Proc(
+        Command::new(support::worker_bin())
+            .args(["--coordinator", &url, "--threads", "1", "--name", "w", "--cache"])
+            .arg(dir.path().join("cache"))
+            .env("RUST_LOG", "info")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    let id = submit(&url);
+    // Its first batch is one pass (to measure it); the second takes about 3 s.
+    wait_until(
+        "the worker to hold its second batch",
+        Duration::from_secs(60),
+        || {
+            status(&url, id).is_some_and(|s| {
+                s["iterations_done"].as_u64().unwrap_or(0) >= 1 && s["workers"] == serde_json::json!(["w"])
+            })
+        },
+    );
+    coordinator.sigkill();
+    let down = Instant::now();
+    let results = dir.path().join("cache/results");
+    let kept = || {
+        std::fs::read_dir(&results)
+            .map(|d| {
+                d.flatten()
+                    .any(|e| e.path().extension().is_some_and(|x| x == "batch"))
+            })
+            .unwrap_or(false)
+    };
+    wait_until(
+        "the batch to finish while the coordinator is down",
+        Duration::from_secs(9),
+        kept,
+    );
+    std::thread::sleep(Duration::from_secs(10).saturating_sub(down.elapsed()));
+    let (_coordinator, _) = serve(&data, &bind, &flags);
+    wait_until("the kept batch to be delivered", Duration::from_secs(15), || {
+        !kept()
+    });
+    let s = wait_done(&url, id);
+    assert_eq!(s["iterations_done"], 40, "{s}");
+    let log = std::fs::read_to_string(&log).unwrap();
+    assert!(log.contains("cannot reach the coordinator"), "{log}");
+    assert!(log.contains("answers again"), "{log}");
+    assert!(
+        !log.contains("result refused"),
+        "the kept batch was refused: {log}"
+    );
+    assert!(
+        image(&url, id) == local_render(dir.path()),
+        "bytes differ after a batch was delivered across a restart"
     );
 }
 

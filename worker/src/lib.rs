@@ -3,9 +3,12 @@
 //! while heartbeating, upload the sum, repeat.
 //!
 //! On shutdown (SIGTERM, ctrl-c) the batch under way is finished and uploaded, then the worker
-//! exits. A lost lease (expired, job cancelled) stops the batch at the next pass.
+//! exits. A lost lease (expired, job cancelled) stops the batch at the next pass. A finished
+//! batch is kept on disk until the coordinator has it (see [`outbox`]).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+
+pub mod outbox;
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -21,6 +24,8 @@ use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encod
 use photonfarm::render::render_batch;
 use photonfarm::scene::Scene;
 use tokio::sync::watch;
+
+use crate::outbox::{Outbox, Parcel};
 
 /// Worker settings.
 #[derive(Clone, Debug)]
@@ -90,6 +95,15 @@ pub async fn run(
     let mut backoff = Duration::from_millis(200);
     tracing::info!(name = %config.name, threads = config.threads, coordinator = %client.base, "worker started");
     let mut trouble = Trouble::default();
+    let outbox = Outbox::open(&config.cache)?;
+    // Results an earlier run finished but could not deliver.
+    for parcel in outbox.waiting() {
+        tracing::info!(
+            lease = parcel.lease_id,
+            "delivering a batch kept from an earlier run"
+        );
+        deliver(&client, &outbox, &parcel, &mut trouble, &mut stop_rx).await?;
+    }
     while !*stop_rx.borrow() {
         let lease = match request_lease(&client, &config).await {
             Ok(Some(lease)) => {
@@ -118,20 +132,26 @@ pub async fn run(
                 continue;
             }
         };
-        if let Err(e) = work_on(&client, &config, &pool, &mut scenes, lease.clone()).await {
-            tracing::error!(lease = lease.lease_id, "batch failed: {e:#}");
-            let release = Release {
-                error: Some(format!("{e:#}")),
-            };
-            let _ = client
-                .req(
-                    reqwest::Method::POST,
-                    &format!("/api/leases/{}/release", lease.lease_id),
-                )
-                .header(LEASE_KEY_HEADER, &lease.key)
-                .json(&release)
-                .send()
-                .await;
+        match work_on(&client, &config, &pool, &mut scenes, lease.clone()).await {
+            Ok(Some(parcel)) => {
+                deliver(&client, &outbox, &parcel, &mut trouble, &mut stop_rx).await?;
+            }
+            Ok(None) => {}
+            Err(e) => {
+                tracing::error!(lease = lease.lease_id, "batch failed: {e:#}");
+                let release = Release {
+                    error: Some(format!("{e:#}")),
+                };
+                let _ = client
+                    .req(
+                        reqwest::Method::POST,
+                        &format!("/api/leases/{}/release", lease.lease_id),
+                    )
+                    .header(LEASE_KEY_HEADER, &lease.key)
+                    .json(&release)
+                    .send()
+                    .await;
+            }
         }
     }
     Ok(())
@@ -139,7 +159,7 @@ pub async fn run(
 
 /// Why asking for work failed.
 #[derive(Debug, thiserror::Error)]
-enum LeaseError {
+enum RequestError {
     /// No answer: the coordinator is down, restarting or not at that address.
     #[error("cannot reach the coordinator: {0}")]
     Unreachable(String),
@@ -178,10 +198,10 @@ struct Trouble {
 
 impl Trouble {
     /// A failed request: logged at once, then every [`REPEAT_LOG`]; an error ends the worker.
-    fn failed(&mut self, url: &str, e: &LeaseError) -> anyhow::Result<()> {
+    fn failed(&mut self, url: &str, e: &RequestError) -> anyhow::Result<()> {
         let now = std::time::Instant::now();
         self.failing_since.get_or_insert(now);
-        self.refusals = if matches!(e, LeaseError::Refused(_)) {
+        self.refusals = if matches!(e, RequestError::Refused(_)) {
             self.refusals + 1
         } else {
             0
@@ -227,7 +247,7 @@ fn coordinator_url(given: &str) -> anyhow::Result<String> {
     Ok(given.trim_end_matches('/').to_string())
 }
 
-async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<Lease>, LeaseError> {
+async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<Lease>, RequestError> {
     let req = LeaseRequest {
         worker: config.name.clone(),
         threads: config.threads as u32,
@@ -237,18 +257,18 @@ async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<
         .json(&req)
         .send()
         .await
-        .map_err(|e| LeaseError::Unreachable(error_chain(&e)))?;
+        .map_err(|e| RequestError::Unreachable(error_chain(&e)))?;
     match resp.status() {
         reqwest::StatusCode::NO_CONTENT => Ok(None),
         s if s.is_success() => {
             Ok(Some(resp.json().await.map_err(|e| {
-                LeaseError::Other(s, format!("unreadable lease: {e}"))
+                RequestError::Other(s, format!("unreadable lease: {e}"))
             })?))
         }
         s @ (reqwest::StatusCode::UNAUTHORIZED | reqwest::StatusCode::FORBIDDEN) => {
-            Err(LeaseError::Refused(s))
+            Err(RequestError::Refused(s))
         }
-        s => Err(LeaseError::Other(s, resp.text().await.unwrap_or_default())),
+        s => Err(RequestError::Other(s, resp.text().await.unwrap_or_default())),
     }
 }
 
@@ -264,14 +284,15 @@ fn error_chain(e: &dyn std::error::Error) -> String {
     out
 }
 
-/// Loads (or reuses) the lease's scene, renders the batch with heartbeats, uploads the result.
+/// Loads (or reuses) the lease's scene, renders the batch with heartbeats and keeps the result
+/// in the outbox; returns it (None if the lease was lost on the way).
 async fn work_on(
     client: &Arc<Client>,
     config: &WorkerConfig,
     pool: &Arc<rayon::ThreadPool>,
     scenes: &mut SceneCache,
     lease: Lease,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<Option<Parcel>> {
     let scene = load_scene(client, config, scenes, &lease).await?;
     // Before any allocation for the batch: the film and the photon buffers.
     config
@@ -322,40 +343,96 @@ async fn work_on(
             lease = lease.lease_id,
             "lease lost (expired or job cancelled); batch dropped"
         );
-        return Ok(());
+        return Ok(None);
     };
-    let resp = client
-        .req(
-            reqwest::Method::PUT,
-            &format!("/api/leases/{}/result", lease.lease_id),
-        )
-        .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
-        .header(LEASE_KEY_HEADER, &lease.key)
-        .body(encode_batch(&sum))
-        .send()
-        .await
-        .context("cannot upload the result")?;
-    match resp.status() {
-        s if s.is_success() => {
-            tracing::info!(
-                job = lease.job_id,
-                start = lease.start,
-                end = lease.end,
-                "batch delivered"
-            );
+    let parcel = Parcel {
+        lease_id: lease.lease_id,
+        key: lease.key.clone(),
+        job_id: lease.job_id,
+        start: lease.start,
+        end: lease.end,
+    };
+    Outbox::open(&config.cache)?.put(&parcel, &encode_batch(&sum))?;
+    Ok(Some(parcel))
+}
+
+/// Longest wait between two attempts to deliver a result.
+const MAX_DELIVERY_BACKOFF: Duration = Duration::from_secs(5);
+/// After a shutdown signal, how long a worker keeps trying to deliver before it leaves the
+/// result on disk for its next start.
+const DELIVERY_AFTER_STOP: Duration = Duration::from_secs(30);
+
+/// Sends a kept result until the coordinator answers: accepted or refused for good, it leaves
+/// the outbox; unreachable (restarting, network down) or failing (5xx), it is sent again with
+/// backoff. Returns whether it was accepted.
+async fn deliver(
+    client: &Client,
+    outbox: &Outbox,
+    parcel: &Parcel,
+    trouble: &mut Trouble,
+    stop: &mut watch::Receiver<bool>,
+) -> anyhow::Result<bool> {
+    let bytes = outbox.bytes(parcel)?;
+    let mut backoff = Duration::from_millis(200);
+    let mut stopped_at: Option<std::time::Instant> = None;
+    loop {
+        let sent = client
+            .req(
+                reqwest::Method::PUT,
+                &format!("/api/leases/{}/result", parcel.lease_id),
+            )
+            .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
+            .header(LEASE_KEY_HEADER, &parcel.key)
+            .body(bytes.clone())
+            .send()
+            .await;
+        let failure = match sent {
+            Ok(resp) if resp.status().is_success() => {
+                trouble.cleared(&client.base);
+                outbox.remove(parcel);
+                tracing::info!(
+                    job = parcel.job_id,
+                    start = parcel.start,
+                    end = parcel.end,
+                    "batch delivered"
+                );
+                return Ok(true);
+            }
+            Ok(resp) if resp.status().is_server_error() => {
+                let s = resp.status();
+                RequestError::Other(s, resp.text().await.unwrap_or_default())
+            }
+            Ok(resp) => {
+                // Refused for good: the lease expired and went to another worker, the job
+                // ended, or the result does not fit. Sending it again cannot help.
+                trouble.cleared(&client.base);
+                outbox.remove(parcel);
+                let s = resp.status();
+                let text = resp.text().await.unwrap_or_default();
+                tracing::warn!(lease = parcel.lease_id, "result refused: {s} {}", text.trim());
+                return Ok(false);
+            }
+            Err(e) => RequestError::Unreachable(error_chain(&e)),
+        };
+        trouble.failed(&client.base, &failure)?;
+        if *stop.borrow() {
+            let since = *stopped_at.get_or_insert_with(std::time::Instant::now);
+            if since.elapsed() >= DELIVERY_AFTER_STOP {
+                tracing::warn!(
+                    lease = parcel.lease_id,
+                    "stopping with the result undelivered: it stays in {} and a worker started \
+                     with the same --cache sends it",
+                    outbox.path_of(parcel).display()
+                );
+                return Ok(false);
+            }
         }
-        reqwest::StatusCode::CONFLICT | reqwest::StatusCode::GONE => {
-            tracing::warn!(
-                lease = lease.lease_id,
-                "result refused: the lease was reassigned or the job ended"
-            );
+        tokio::select! {
+            _ = tokio::time::sleep(backoff) => {}
+            _ = stop.changed(), if !*stop.borrow() => {}
         }
-        s => {
-            let text = resp.text().await.unwrap_or_default();
-            tracing::warn!(lease = lease.lease_id, "result refused: {s} {text}");
-        }
+        backoff = (backoff * 2).min(MAX_DELIVERY_BACKOFF);
     }
-    Ok(())
 }
 
 async fn heartbeat_loop(client: Arc<Client>, lease: u64, key: String, every_ms: u64, lost: Arc<AtomicBool>) {
