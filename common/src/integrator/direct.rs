@@ -6,9 +6,9 @@
 use glam::{Vec2, Vec3A};
 
 use super::mis_weight;
-use crate::bsdf::Bsdf;
+use super::walk::Hit;
 use crate::color::Rgb;
-use crate::geometry::{Frame, SurfacePoint};
+use crate::geometry::SurfacePoint;
 use crate::light::Light;
 use crate::scene::Scene;
 
@@ -44,55 +44,34 @@ pub fn emitted(
     }
 }
 
-/// One light sample's contribution at surface `sp` (seen from local direction `wi_local`),
-/// through the media on the way, weighted against BSDF sampling when `with_mis` (the path goes
-/// on to sample the BSDF) and in full otherwise. `medium` is the medium the path arrived in.
-#[allow(clippy::too_many_arguments)]
+/// One light sample's contribution at surface `hit`, through the media on the way. `medium` is
+/// the medium the path arrived in. The sample is weighted by the power heuristic against BSDF
+/// sampling that takes `bsdf_share` times as many samples (1 for a path that goes on to sample
+/// the BSDF; 0 for none, which gives the full contribution).
 pub fn light_sample(
     scene: &Scene,
-    bsdf: &Bsdf,
-    sp: &SurfacePoint,
-    frame: &Frame,
-    wi_local: Vec3A,
-    medium: Option<u32>,
-    u_select: f32,
-    u: Vec2,
-    with_mis: bool,
-) -> Rgb {
-    let bsdf_share = if with_mis { 1.0 } else { 0.0 };
-    light_sample_shared(scene, bsdf, sp, frame, wi_local, medium, u_select, u, bsdf_share)
-}
-
-/// [`light_sample`], weighted against BSDF sampling that takes `bsdf_share` times as many
-/// samples as light sampling (0: no BSDF sampling, full weight).
-#[allow(clippy::too_many_arguments)]
-pub fn light_sample_shared(
-    scene: &Scene,
-    bsdf: &Bsdf,
-    sp: &SurfacePoint,
-    frame: &Frame,
-    wi_local: Vec3A,
+    hit: &Hit,
     medium: Option<u32>,
     u_select: f32,
     u: Vec2,
     bsdf_share: f32,
 ) -> Rgb {
+    let sp = &hit.sp;
     let Some((_, ls)) = scene.sample_light(sp.p, u_select, u) else {
         return Rgb::ZERO;
     };
-    let wl = frame.to_local(ls.wi);
-    let f = bsdf.eval(wi_local, wl);
+    let wl = hit.frame.to_local(ls.wi);
+    let f = hit.bsdf.eval(hit.wo_local, wl);
     if f == Rgb::ZERO {
         return Rgb::ZERO;
     }
     // The shadow ray leaves on the light's side of the surface.
-    let shape = &scene.shapes[sp.shape as usize];
-    let tr = scene.transmittance(sp, &ls, shape.medium_after(ls.wi, sp.ng, medium));
+    let tr = scene.transmittance(sp, &ls, hit.shape.medium_after(ls.wi, sp.ng, medium));
     if tr == Rgb::ZERO {
         return Rgb::ZERO;
     }
     let w = if bsdf_share > 0.0 && !ls.delta {
-        mis_weight(ls.pdf, bsdf_share * bsdf.pdf(wi_local, wl))
+        mis_weight(ls.pdf, bsdf_share * hit.bsdf.pdf(hit.wo_local, wl))
     } else {
         1.0
     };
@@ -100,8 +79,9 @@ pub fn light_sample_shared(
 }
 
 /// One light sample's contribution at point `p` inside `medium`, scattered back along the
-/// path (which travelled along `d`) by the phase function, weighted against phase sampling when
-/// `with_mis`. The medium's albedo is not included.
+/// path (which travelled along `d`) by the phase function, weighted as [`light_sample`] is
+/// against `phase_share` times as many phase function samples. The medium's albedo is not
+/// included.
 pub fn light_sample_in_medium(
     scene: &Scene,
     p: Vec3A,
@@ -109,7 +89,7 @@ pub fn light_sample_in_medium(
     medium: u32,
     u_select: f32,
     u: Vec2,
-    with_mis: bool,
+    phase_share: f32,
 ) -> Rgb {
     let Some((_, ls)) = scene.sample_light(p, u_select, u) else {
         return Rgb::ZERO;
@@ -119,8 +99,8 @@ pub fn light_sample_in_medium(
     if tr == Rgb::ZERO {
         return Rgb::ZERO;
     }
-    let w = if with_mis && !ls.delta {
-        mis_weight(ls.pdf, phase)
+    let w = if phase_share > 0.0 && !ls.delta {
+        mis_weight(ls.pdf, phase_share * phase)
     } else {
         1.0
     };

@@ -6,9 +6,10 @@
 //! show MIS) must not be rendered with full global illumination.
 
 use super::direct::{self as light, PreviousBounce};
+use super::walk::{Hit, Walk};
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::geometry::{Frame, Ray};
+use crate::geometry::Ray;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 
@@ -46,50 +47,44 @@ pub fn radiance(scene: &Scene, settings: &DirectSettings, ray: Ray, sampler: &mu
     let Some((_, sp)) = scene.intersect(&ray) else {
         return Rgb::ZERO;
     };
-    let shape = &scene.shapes[sp.shape as usize];
-    let bsdf = &scene.bsdfs[shape.bsdf as usize];
-    let wo = -ray.d;
+    let hit = Hit::new(scene, sp, -ray.d);
     let mut l = Rgb::ZERO;
-    if let Some(li) = shape.light {
-        l += light::emitted(scene, li, &sp, wo, None);
+    if let Some(li) = hit.shape.light {
+        l += light::emitted(scene, li, &hit.sp, hit.wo, None);
     }
     let (ne, nb) = (settings.emitter_samples, settings.bsdf_samples);
-    let frame = Frame::from_normal(sp.ns);
-    let wi_local = frame.to_local(wo);
 
     // Each light sample is weighted against the BSDF samples, nb / ne times as many.
-    if ne > 0 && bsdf.has_smooth() {
+    if ne > 0 && hit.bsdf.has_smooth() {
         let share = nb as f32 / ne as f32;
         for _ in 0..ne {
             let (u_select, u) = (sampler.next_1d(), sampler.next_2d());
-            l += light::light_sample_shared(scene, bsdf, &sp, &frame, wi_local, None, u_select, u, share)
-                / ne as f32;
+            l += light::light_sample(scene, &hit, None, u_select, u, share) / ne as f32;
         }
     }
     for _ in 0..nb {
-        let (u1, u2) = (sampler.next_1d(), sampler.next_2d());
-        let Some(bs) = bsdf.sample(wi_local, u1, u2, TransportMode::Radiance) else {
+        let Some(bs) = Walk::sample_bsdf(&hit, sampler, TransportMode::Radiance) else {
             continue;
         };
-        let wi = frame.to_world(bs.wo);
-        let Some((_, hit)) = scene.intersect(&Scene::spawn_ray(&sp, wi)) else {
+        let wi = hit.frame.to_world(bs.wo);
+        let Some((_, found)) = scene.intersect(&Scene::spawn_ray(&hit.sp, wi)) else {
             continue;
         };
-        let Some(li) = scene.shapes[hit.shape as usize].light else {
+        let Some(li) = scene.shapes[found.shape as usize].light else {
             continue;
         };
         // The previous bounce's density, scaled so that the power heuristic compares it with
         // the light samples' in proportion to the sample counts.
         let prev = PreviousBounce {
-            p: sp.p,
+            p: hit.sp.p,
             pdf: if ne > 0 {
                 bs.pdf * nb as f32 / ne as f32
             } else {
                 f32::INFINITY
             },
-            delta: bs.delta || ne == 0 || !bsdf.has_smooth(),
+            delta: bs.delta || ne == 0 || !hit.bsdf.has_smooth(),
         };
-        l += bs.weight * light::emitted(scene, li, &hit, -wi, Some(&prev)) / nb as f32;
+        l += bs.weight * light::emitted(scene, li, &found, -wi, Some(&prev)) / nb as f32;
     }
     l
 }

@@ -11,12 +11,11 @@ use std::f32::consts::PI;
 use glam::Vec3A;
 
 use super::photon_map::PhotonMap;
-use crate::bsdf::{Bsdf, TransportMode};
+use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::geometry::{Frame, Ray, SurfacePoint};
-use crate::integrator::direct::{self, PreviousBounce};
-use crate::integrator::russian_roulette;
-use crate::medium::Flight;
+use crate::geometry::Ray;
+use crate::integrator::direct;
+use crate::integrator::walk::{Event, Hit, Walk};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 
@@ -43,107 +42,60 @@ pub struct GatherContext<'a> {
 }
 
 /// Radiance along the camera ray of one pixel sample.
-pub fn camera_path(ctx: &GatherContext, mut ray: Ray, sampler: &mut Sampler) -> Rgb {
+pub fn camera_path(ctx: &GatherContext, ray: Ray, sampler: &mut Sampler) -> Rgb {
     let scene = ctx.scene;
     let mut l = Rgb::ZERO;
-    let mut beta = Rgb::ONE;
-    let mut eta = 1.0f32;
-    let mut prev: Option<PreviousBounce> = None;
-    let mut medium = scene.camera_medium;
-    let mut depth = 0;
-    let mut crossings = 0;
-    while depth < ctx.max_depth {
-        let hit = scene.intersect(&ray);
-        let t_surface = hit.as_ref().map_or(f32::INFINITY, |(h, _)| h.t);
-        // In a medium, the first collision is a gather point: direct light plus volume photons.
-        if let Some(m) = medium {
-            let med = &scene.media[m as usize];
-            match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
-                Flight::Collision { t, weight } => {
-                    beta *= weight * med.albedo;
-                    let p = ray.at(t);
-                    let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
-                    l += beta * direct::light_sample_in_medium(scene, p, ray.d, m, u_sel, u_light, false);
-                    l += beta * volume_estimate(ctx, p, ray.d, m);
+    let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
+    while walk.depth < ctx.max_depth {
+        match walk.next_event(scene, sampler) {
+            Event::Gone => break,
+            // In a medium, the first collision is a gather point: direct light plus volume
+            // photons.
+            Event::Medium { p, medium, weight } => {
+                walk.beta *= weight * scene.media[medium as usize].albedo;
+                let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
+                l += walk.beta
+                    * direct::light_sample_in_medium(scene, p, walk.ray.d, medium, u_sel, u_light, 0.0);
+                l += walk.beta * volume_estimate(ctx, p, walk.ray.d, medium);
+                break;
+            }
+            Event::Surface(hit) => {
+                // Emitters seen directly, through specular bounces (full weight: light sampling
+                // cannot find these paths) or through glossy ones (weighted against light
+                // sampling).
+                l += walk.emission(scene, &hit);
+                if walk.depth + 1 >= ctx.max_depth {
                     break;
                 }
-                Flight::Passed { weight } => beta *= weight,
+                let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
+                let gather = hit.bsdf.gathers_photons();
+                if gather {
+                    l += walk.beta * direct::light_sample(scene, &hit, walk.medium, u_sel, u_light, 0.0);
+                    l += walk.beta * photon_estimate(ctx, &hit);
+                } else if hit.bsdf.has_smooth() {
+                    l += walk.beta * direct::light_sample(scene, &hit, walk.medium, u_sel, u_light, 1.0);
+                }
+                // Continue through specular lobes, and through glossy ones where nothing was
+                // gathered.
+                let Some(bs) = Walk::sample_bsdf(&hit, sampler, TransportMode::Radiance) else {
+                    break;
+                };
+                if gather && !bs.delta {
+                    break;
+                }
+                walk.follow(&hit, &bs);
+                if !walk.survives_roulette(ctx.rr_depth, sampler) {
+                    break;
+                }
             }
-        }
-        let Some((_, sp)) = hit else {
-            break;
-        };
-        let wo = -ray.d;
-        let shape = &scene.shapes[sp.shape as usize];
-        let bsdf = &scene.bsdfs[shape.bsdf as usize];
-        if bsdf.is_null() {
-            let Some((next, entered)) = scene.cross_boundary(&sp, ray.d, medium, &mut crossings) else {
-                break;
-            };
-            (ray, medium) = (next, entered);
-            continue;
-        }
-        // Emitters seen directly, through specular bounces (full weight: light sampling cannot
-        // find these paths) or through glossy ones (weighted against light sampling).
-        if let Some(li) = shape.light {
-            l += beta * direct::emitted(scene, li, &sp, wo, prev.as_ref());
-        }
-        if depth + 1 >= ctx.max_depth {
-            break;
-        }
-        let frame = Frame::from_normal(sp.ns);
-        let wi_local = frame.to_local(wo);
-        let u_light = sampler.next_1d();
-        let u_light2 = sampler.next_2d();
-        let gather = bsdf.gathers_photons();
-        if gather {
-            l += beta
-                * direct::light_sample(
-                    scene, bsdf, &sp, &frame, wi_local, medium, u_light, u_light2, false,
-                );
-            l += beta * photon_estimate(ctx, bsdf, &sp, &frame, wo, wi_local);
-        } else if bsdf.has_smooth() {
-            l += beta
-                * direct::light_sample(
-                    scene, bsdf, &sp, &frame, wi_local, medium, u_light, u_light2, true,
-                );
-        }
-        // Continue through specular lobes, and through glossy ones where nothing was gathered.
-        let u1 = sampler.next_1d();
-        let u2 = sampler.next_2d();
-        let Some(bs) = bsdf.sample(wi_local, u1, u2, TransportMode::Radiance) else {
-            break;
-        };
-        if gather && !bs.delta {
-            break;
-        }
-        beta *= bs.weight;
-        eta *= bs.eta;
-        prev = Some(PreviousBounce {
-            p: sp.p,
-            pdf: bs.pdf,
-            delta: bs.delta,
-        });
-        let d = frame.to_world(bs.wo);
-        medium = shape.medium_after(d, sp.ng, medium);
-        ray = Scene::spawn_ray(&sp, d);
-        depth += 1;
-        if !russian_roulette(&mut beta, eta, depth, ctx.rr_depth, sampler) {
-            break;
         }
     }
     l
 }
 
 /// The density estimate: Σ f · Φ · w / (normalisation · π r²), with the cone filter w.
-fn photon_estimate(
-    ctx: &GatherContext,
-    bsdf: &Bsdf,
-    sp: &SurfacePoint,
-    frame: &Frame,
-    wo: Vec3A,
-    wi_local: Vec3A,
-) -> Rgb {
+fn photon_estimate(ctx: &GatherContext, hit: &Hit) -> Rgb {
+    let (sp, wo) = (&hit.sp, hit.wo);
     let inv_kr = 1.0 / (ctx.k * ctx.radius);
     let side = wo.dot(sp.ng);
     let mut sum = Rgb::ZERO;
@@ -154,12 +106,12 @@ fn photon_estimate(
         if dir.dot(sp.ng) * side <= 0.0 {
             return;
         }
-        let local = frame.to_local(dir);
+        let local = hit.frame.to_local(dir);
         if local.z.abs() < 1e-6 {
             return;
         }
         // eval includes |cos| of the photon's direction; the photon's power already does.
-        let f = bsdf.eval(wi_local, local) / local.z.abs();
+        let f = hit.bsdf.eval(hit.wo_local, local) / local.z.abs();
         sum += f * ph.power() * (1.0 - d2.sqrt() * inv_kr);
     });
     let norm = 1.0 - 2.0 / (3.0 * ctx.k);

@@ -6,8 +6,8 @@ use rayon::prelude::*;
 
 use super::photon::Photon;
 use crate::bsdf::TransportMode;
-use crate::geometry::{Frame, Ray, offset_ray_origin};
-use crate::medium::Flight;
+use crate::geometry::{Ray, offset_ray_origin};
+use crate::integrator::walk::{Event, Walk, photon_roulette};
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -70,76 +70,43 @@ fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u3
         return;
     };
     // In units of the total power: beta = power / (pmf · total).
-    let mut beta = e.power / (pmf * scene.light_selection.total());
+    let beta = e.power / (pmf * scene.light_selection.total());
     let origin = if e.n == glam::Vec3A::ZERO {
         e.origin
     } else {
         offset_ray_origin(e.origin, e.origin_err, e.n, e.dir)
     };
-    let mut ray = Ray::new(origin, e.dir);
-    let mut medium = scene.light_media[light];
-    let mut depth = 0u32;
-    let mut crossings = 0u32;
-    while depth < max_depth {
-        let hit = scene.intersect(&ray);
-        let t_surface = hit.as_ref().map_or(f32::INFINITY, |(h, _)| h.t);
-        if let Some(m) = medium {
-            let med = &scene.media[m as usize];
-            match med.sample_flight(t_surface, s.next_1d(), s.next_1d()) {
-                Flight::Collision { t, weight } => {
-                    beta *= weight;
-                    let p = ray.at(t);
-                    // As on surfaces, the first collision is direct light, sampled by the camera.
-                    if depth > 0 {
-                        out.volume.push(Photon::new(p, -ray.d, beta));
-                    }
-                    // Scatter with probability of the albedo; survivors keep their power.
-                    let q = med.albedo.max_element().min(1.0);
-                    if s.next_1d() >= q {
-                        return;
-                    }
-                    beta *= med.albedo / q;
-                    let (d, _) = med.phase.sample(ray.d, s.next_2d());
-                    ray = Ray::new(p, d);
-                    depth += 1;
-                    continue;
+    let mut walk = Walk::new(Ray::new(origin, e.dir), beta, scene.light_media[light]);
+    while walk.depth < max_depth {
+        match walk.next_event(scene, &mut s) {
+            Event::Gone => return,
+            Event::Medium { p, medium, weight } => {
+                walk.beta *= weight;
+                // As on surfaces, the first collision is direct light, sampled by the camera.
+                if walk.depth > 0 {
+                    out.volume.push(Photon::new(p, -walk.ray.d, walk.beta));
                 }
-                Flight::Passed { weight } => beta *= weight,
+                let Some(weight) = photon_roulette(scene.media[medium as usize].albedo, &mut s) else {
+                    return;
+                };
+                walk.beta *= weight;
+                walk.scatter_in_medium(scene, p, medium, &mut s);
+            }
+            Event::Surface(hit) => {
+                // The first hit is direct light, which the camera pass samples explicitly;
+                // photons are kept only where the camera pass gathers them.
+                if walk.depth > 0 && hit.bsdf.gathers_photons() {
+                    out.surface.push(Photon::new(hit.sp.p, hit.wo, walk.beta));
+                }
+                let Some(mut bs) = Walk::sample_bsdf(&hit, &mut s, TransportMode::Importance) else {
+                    return;
+                };
+                let Some(weight) = photon_roulette(bs.weight, &mut s) else {
+                    return;
+                };
+                bs.weight = weight;
+                walk.follow(&hit, &bs);
             }
         }
-        let Some((_, sp)) = hit else {
-            return;
-        };
-        let shape = &scene.shapes[sp.shape as usize];
-        let bsdf = &scene.bsdfs[shape.bsdf as usize];
-        if bsdf.is_null() {
-            let Some((next, entered)) = scene.cross_boundary(&sp, ray.d, medium, &mut crossings) else {
-                return;
-            };
-            (ray, medium) = (next, entered);
-            continue;
-        }
-        let wi = -ray.d;
-        // The first hit is direct light, which the camera pass samples explicitly; photons are
-        // kept only where the camera pass gathers them.
-        if depth > 0 && bsdf.gathers_photons() {
-            out.surface.push(Photon::new(sp.p, wi, beta));
-        }
-        let frame = Frame::from_normal(sp.ns);
-        let u1 = s.next_1d();
-        let u2 = s.next_2d();
-        let Some(bs) = bsdf.sample(frame.to_local(wi), u1, u2, TransportMode::Importance) else {
-            return;
-        };
-        // Russian roulette by the bounce's albedo: surviving photons keep their power.
-        let q = bs.weight.max_element().min(1.0);
-        if s.next_1d() >= q {
-            return;
-        }
-        beta *= bs.weight / q;
-        let d = frame.to_world(bs.wo);
-        medium = shape.medium_after(d, sp.ng, medium);
-        ray = Scene::spawn_ray(&sp, d);
-        depth += 1;
     }
 }

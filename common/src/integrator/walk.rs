@@ -1,0 +1,205 @@
+//! One bounce of a light path, written once for the three transport loops: the path tracer, SPPM's
+//! camera pass and its photon pass.
+//!
+//! A [`Walk`] is a path between bounces. [`Walk::next_event`] finds where it interacts next (a
+//! collision in a medium, a surface that scatters, or nothing), crossing medium boundaries on the
+//! way; [`Walk::sample_bsdf`], [`Walk::follow`] and [`Walk::scatter_in_medium`] move it on. What
+//! differs between the loops stays in them, where it reads as the algorithm: which transport
+//! mode the BSDF is sampled in, what a collision's weight includes, where light is sampled or
+//! photons are gathered or stored, and which Russian roulette decides survival.
+
+use glam::Vec3A;
+
+use super::direct::PreviousBounce;
+use crate::bsdf::{Bsdf, BsdfSample, TransportMode};
+use crate::color::Rgb;
+use crate::geometry::{Frame, Ray, SurfacePoint};
+use crate::medium::Flight;
+use crate::sampling::Sampler;
+use crate::scene::{Scene, ShapeInfo};
+
+/// A path between bounces.
+pub struct Walk {
+    /// The ray to follow next.
+    pub ray: Ray,
+    /// Throughput (camera paths) or power (photons).
+    pub beta: Rgb,
+    /// Product of the relative indices of refraction crossed (Mitsuba's roulette uses it).
+    pub eta: f32,
+    /// The medium the ray travels in.
+    pub medium: Option<u32>,
+    /// Bounces so far (surface and medium scattering; boundary crossings do not count).
+    pub depth: u32,
+    /// The last bounce, for weighting emission found by it against light sampling.
+    pub prev: Option<PreviousBounce>,
+    /// Medium boundaries crossed (bounded by [`Scene::cross_boundary`]).
+    crossings: u32,
+}
+
+/// Where a walk interacts next.
+pub enum Event<'s> {
+    /// It collided in medium `medium` at `p`. `weight` is the free flight's (transmittance over
+    /// its density); the caller applies it, with the medium's albedo where it models
+    /// scattering as a weight.
+    Medium {
+        /// Where.
+        p: Vec3A,
+        /// Which medium.
+        medium: u32,
+        /// The free flight's weight, not yet in `beta`.
+        weight: Rgb,
+    },
+    /// It reached a surface that scatters.
+    Surface(Hit<'s>),
+    /// It left the scene, or crossed too many boundaries.
+    Gone,
+}
+
+/// A surface a walk reached, with what every loop needs of it.
+pub struct Hit<'s> {
+    /// The point.
+    pub sp: SurfacePoint,
+    /// Its shape.
+    pub shape: &'s ShapeInfo,
+    /// Its material.
+    pub bsdf: &'s Bsdf,
+    /// The shading frame.
+    pub frame: Frame,
+    /// The direction back along the arriving ray (world).
+    pub wo: Vec3A,
+    /// The same, in the shading frame.
+    pub wo_local: Vec3A,
+}
+
+impl<'s> Hit<'s> {
+    /// The surface at `sp`, seen from direction `wo`.
+    pub fn new(scene: &'s Scene, sp: SurfacePoint, wo: Vec3A) -> Hit<'s> {
+        let shape = &scene.shapes[sp.shape as usize];
+        let bsdf = &scene.bsdfs[shape.bsdf as usize];
+        let frame = Frame::from_normal(sp.ns);
+        let wo_local = frame.to_local(wo);
+        Hit {
+            sp,
+            shape,
+            bsdf,
+            frame,
+            wo,
+            wo_local,
+        }
+    }
+}
+
+impl Walk {
+    /// A walk starting along `ray` in `medium`, carrying `beta`.
+    pub fn new(ray: Ray, beta: Rgb, medium: Option<u32>) -> Walk {
+        Walk {
+            ray,
+            beta,
+            eta: 1.0,
+            medium,
+            depth: 0,
+            prev: None,
+            crossings: 0,
+        }
+    }
+
+    /// Follows the ray to its next interaction: a free flight through the current medium (two
+    /// random numbers), then the surface, crossing null surfaces (medium boundaries) without a
+    /// bounce. A flight that passes through its medium has its weight applied here.
+    pub fn next_event<'s>(&mut self, scene: &'s Scene, sampler: &mut Sampler) -> Event<'s> {
+        loop {
+            let hit = scene.intersect(&self.ray);
+            if let Some(m) = self.medium {
+                let t_surface = hit.as_ref().map_or(f32::INFINITY, |(h, _)| h.t);
+                let med = &scene.media[m as usize];
+                match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
+                    Flight::Collision { t, weight } => {
+                        return Event::Medium {
+                            p: self.ray.at(t),
+                            medium: m,
+                            weight,
+                        };
+                    }
+                    Flight::Passed { weight } => self.beta *= weight,
+                }
+            }
+            let Some((_, sp)) = hit else {
+                return Event::Gone;
+            };
+            let shape = &scene.shapes[sp.shape as usize];
+            if scene.bsdfs[shape.bsdf as usize].is_null() {
+                match scene.cross_boundary(&sp, self.ray.d, self.medium, &mut self.crossings) {
+                    Some((next, entered)) => (self.ray, self.medium) = (next, entered),
+                    None => return Event::Gone,
+                }
+                continue;
+            }
+            return Event::Surface(Hit::new(scene, sp, -self.ray.d));
+        }
+    }
+
+    /// What `hit` emits back along the walk, times the throughput, weighted against the light
+    /// sampling of the previous bounce (in full for camera rays and after specular bounces).
+    pub fn emission(&self, scene: &Scene, hit: &Hit) -> Rgb {
+        match hit.shape.light {
+            Some(li) => self.beta * super::direct::emitted(scene, li, &hit.sp, hit.wo, self.prev.as_ref()),
+            None => Rgb::ZERO,
+        }
+    }
+
+    /// Samples the BSDF at `hit` for the next direction (three random numbers).
+    pub fn sample_bsdf(hit: &Hit, sampler: &mut Sampler, mode: TransportMode) -> Option<BsdfSample> {
+        let u1 = sampler.next_1d();
+        let u2 = sampler.next_2d();
+        hit.bsdf.sample(hit.wo_local, u1, u2, mode)
+    }
+
+    /// Bounces off `hit` along the sampled direction: the throughput takes the sample's
+    /// weight, the path enters the medium on that side, and the bounce counts.
+    pub fn follow(&mut self, hit: &Hit, bs: &BsdfSample) {
+        let d = hit.frame.to_world(bs.wo);
+        self.beta *= bs.weight;
+        self.eta *= bs.eta;
+        self.prev = Some(PreviousBounce {
+            p: hit.sp.p,
+            pdf: bs.pdf,
+            delta: bs.delta,
+        });
+        self.medium = hit.shape.medium_after(d, hit.sp.ng, self.medium);
+        self.ray = Scene::spawn_ray(&hit.sp, d);
+        self.depth += 1;
+    }
+
+    /// Scatters at `p` in medium `m` by sampling its phase function (two random numbers); the
+    /// phase function's weight is one.
+    pub fn scatter_in_medium(&mut self, scene: &Scene, p: Vec3A, m: u32, sampler: &mut Sampler) {
+        let (d, pdf) = scene.media[m as usize]
+            .phase
+            .sample(self.ray.d, sampler.next_2d());
+        self.prev = Some(PreviousBounce { p, pdf, delta: false });
+        self.ray = Ray::new(p, d);
+        self.depth += 1;
+    }
+
+    /// Mitsuba's Russian roulette for camera paths: past `rr_depth` bounces a path survives
+    /// with probability max(throughput) · η² (at most 0.95) and carries 1/q more. False when the
+    /// path ends, or when nothing more could reach the camera along it.
+    pub fn survives_roulette(&mut self, rr_depth: u32, sampler: &mut Sampler) -> bool {
+        if self.depth > rr_depth {
+            let q = (self.beta.max_element() * self.eta * self.eta).min(0.95);
+            if sampler.next_1d() >= q {
+                return false;
+            }
+            self.beta /= q;
+        }
+        self.beta != Rgb::ZERO
+    }
+}
+
+/// Photons' Russian roulette at a scattering event of weight `weight` (a BSDF sample's, or a
+/// medium's albedo): survive with probability max(weight), so that surviving photons keep their
+/// power; returns the weight to apply, or None when the photon ends.
+pub fn photon_roulette(weight: Rgb, sampler: &mut Sampler) -> Option<Rgb> {
+    let q = weight.max_element().min(1.0);
+    (sampler.next_1d() < q).then(|| weight / q)
+}
