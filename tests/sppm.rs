@@ -137,3 +137,10 @@ fn bad_parameters_are_refused() {
     }
     base.validate().unwrap();
 }
+
+/// Textured materials (bitmaps and checkerboards on colours, roughness and a blend weight):
+/// photons and the camera pass read the same textures at the same (u, v).
+#[test]
+fn textures_sppm_converges_to_mitsuba() {
+    check_convergence("textures.xml", "textures.exr");
+}

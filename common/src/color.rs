@@ -23,3 +23,12 @@ pub fn srgb_encode(v: f32) -> f32 {
         1.055 * v.powf(1.0 / 2.4) - 0.055
     }
 }
+
+/// The inverse of [`srgb_encode`]: an sRGB-encoded value to linear.
+pub fn srgb_decode(v: f32) -> f32 {
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}

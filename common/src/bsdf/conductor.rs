@@ -2,8 +2,9 @@ use glam::{Vec2, Vec3A};
 
 use super::BsdfSample;
 use super::fresnel::{fresnel_conductor, reflect, reflect_about};
-use super::microfacet::Microfacet;
+use super::microfacet::Roughness;
 use crate::color::Rgb;
+use crate::texture::Param;
 
 /// A metal: smooth (a perfect mirror with conductor Fresnel) or rough (GGX).
 #[derive(Clone, Debug)]
@@ -13,24 +14,24 @@ pub struct Conductor {
     /// Imaginary part (absorption).
     pub k: Rgb,
     /// Extra tint, Mitsuba's `specular_reflectance`.
-    pub specular: Rgb,
+    pub specular: Param<Rgb>,
     /// None for the smooth mirror.
-    pub roughness: Option<Microfacet>,
+    pub roughness: Option<Roughness>,
 }
 
 impl Conductor {
-    fn fresnel(&self, cos: f32) -> Rgb {
-        self.specular * fresnel_conductor(cos, self.eta, self.k)
+    fn fresnel(&self, uv: Vec2, cos: f32) -> Rgb {
+        self.specular.at(uv) * fresnel_conductor(cos, self.eta, self.k)
     }
 
-    pub(super) fn sample(&self, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
         if wi.z <= 0.0 {
             return None;
         }
-        let Some(ggx) = self.roughness else {
+        let Some(ggx) = self.roughness.as_ref().map(|r| r.at(uv)) else {
             return Some(BsdfSample {
                 wo: reflect(wi),
-                weight: self.fresnel(wi.z),
+                weight: self.fresnel(uv, wi.z),
                 pdf: 1.0,
                 delta: true,
                 eta: 1.0,
@@ -45,15 +46,15 @@ impl Conductor {
         let pdf = ggx.pdf_visible(wi, m) / (4.0 * wo_m);
         (pdf > 0.0).then(|| BsdfSample {
             wo,
-            weight: self.fresnel(wi.dot(m)) * ggx.g1(wo, m),
+            weight: self.fresnel(uv, wi.dot(m)) * ggx.g1(wo, m),
             pdf,
             delta: false,
             eta: 1.0,
         })
     }
 
-    pub(super) fn eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
-        let Some(ggx) = self.roughness else {
+    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+        let Some(ggx) = self.roughness.as_ref().map(|r| r.at(uv)) else {
             return Rgb::ZERO;
         };
         if wi.z <= 0.0 || wo.z <= 0.0 {
@@ -64,11 +65,11 @@ impl Conductor {
         if d == 0.0 {
             return Rgb::ZERO;
         }
-        self.fresnel(wi.dot(m)) * (d * ggx.g(wi, wo, m) / (4.0 * wi.z))
+        self.fresnel(uv, wi.dot(m)) * (d * ggx.g(wi, wo, m) / (4.0 * wi.z))
     }
 
-    pub(super) fn pdf(&self, wi: Vec3A, wo: Vec3A) -> f32 {
-        let Some(ggx) = self.roughness else {
+    pub(super) fn pdf(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> f32 {
+        let Some(ggx) = self.roughness.as_ref().map(|r| r.at(uv)) else {
             return 0.0;
         };
         if wi.z <= 0.0 || wo.z <= 0.0 {

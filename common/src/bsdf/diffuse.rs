@@ -5,16 +5,17 @@ use glam::{Vec2, Vec3A};
 use super::BsdfSample;
 use crate::color::Rgb;
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
+use crate::texture::Param;
 
 /// Lambertian reflection, one-sided as in Mitsuba (the back is black; use `twosided`).
 #[derive(Clone, Debug)]
 pub struct Diffuse {
     /// Albedo.
-    pub reflectance: Rgb,
+    pub reflectance: Param<Rgb>,
 }
 
 impl Diffuse {
-    pub(super) fn sample(&self, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
         if wi.z <= 0.0 {
             return None;
         }
@@ -22,18 +23,18 @@ impl Diffuse {
         let pdf = square_to_cosine_hemisphere_pdf(wo);
         (pdf > 0.0).then_some(BsdfSample {
             wo,
-            weight: self.reflectance,
+            weight: self.reflectance.at(uv),
             pdf,
             delta: false,
             eta: 1.0,
         })
     }
 
-    pub(super) fn eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Rgb::ZERO;
         }
-        self.reflectance * (FRAC_1_PI * wo.z)
+        self.reflectance.at(uv) * (FRAC_1_PI * wo.z)
     }
 
     pub(super) fn pdf(&self, wi: Vec3A, wo: Vec3A) -> f32 {

@@ -24,6 +24,26 @@ pub struct Microfacet {
     pub alpha: f32,
 }
 
+/// A distribution whose roughness may vary over the surface (a texture on `alpha`).
+#[derive(Clone, Debug)]
+pub struct Roughness {
+    /// Which distribution.
+    pub distribution: Distribution,
+    /// Mitsuba's `alpha`.
+    pub alpha: crate::texture::Param<f32>,
+}
+
+impl Roughness {
+    /// The distribution at `uv`; roughness below 1e-4 is raised to it, as Mitsuba does.
+    #[inline]
+    pub fn at(&self, uv: glam::Vec2) -> Microfacet {
+        Microfacet {
+            distribution: self.distribution,
+            alpha: self.alpha.at(uv).max(1e-4),
+        }
+    }
+}
+
 impl Microfacet {
     /// Normal distribution D(m).
     pub fn d(&self, m: Vec3A) -> f32 {

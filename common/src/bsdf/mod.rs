@@ -12,12 +12,13 @@ mod plastic;
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
-pub use microfacet::{Distribution, Microfacet};
+pub use microfacet::{Distribution, Microfacet, Roughness};
 pub use plastic::Plastic;
 
 use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
+use crate::texture::Param;
 
 /// Which quantity a path carries: camera paths carry radiance, photons carry importance's
 /// adjoint (power). Refraction scales the two differently.
@@ -56,7 +57,7 @@ pub enum Bsdf {
     /// Smooth or rough coated diffuse.
     Plastic(Box<Plastic>),
     /// Linear blend of two materials: (1 - weight) · first + weight · second.
-    Blend(Box<(Bsdf, Bsdf)>, f32),
+    Blend(Box<(Bsdf, Bsdf)>, Param<f32>),
     /// Front material and back material (Mitsuba's `twosided`).
     TwoSided(Box<(Bsdf, Bsdf)>),
     /// No surface at all (Mitsuba's `null`): the boundary of a medium, which rays cross
@@ -65,13 +66,14 @@ pub enum Bsdf {
 }
 
 impl Bsdf {
-    /// Samples `wo` given `wi`. `u1` chooses a lobe, `u2` the direction within it.
-    pub fn sample(&self, wi: Vec3A, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    /// Samples `wo` given `wi` at texture coordinates `uv`. `u1` chooses a lobe, `u2` the
+    /// direction within it.
+    pub fn sample(&self, uv: Vec2, wi: Vec3A, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         match self {
-            Bsdf::Diffuse(b) => b.sample(wi, u2),
-            Bsdf::Conductor(b) => b.sample(wi, u2),
-            Bsdf::Dielectric(b) => b.sample(wi, u1, mode),
-            Bsdf::Plastic(b) => b.sample(wi, u1, u2),
+            Bsdf::Diffuse(b) => b.sample(uv, wi, u2),
+            Bsdf::Conductor(b) => b.sample(uv, wi, u2),
+            Bsdf::Dielectric(b) => b.sample(uv, wi, u1, mode),
+            Bsdf::Plastic(b) => b.sample(uv, wi, u1, u2),
             Bsdf::Null => Some(BsdfSample {
                 wo: -wi,
                 weight: Rgb::ONE,
@@ -80,70 +82,77 @@ impl Bsdf {
                 eta: 1.0,
             }),
             Bsdf::Blend(pair, w) => {
+                let w = w.at(uv).clamp(0.0, 1.0);
                 let (first, second) = (&pair.0, &pair.1);
-                let (chosen, u1) = if u1 >= *w {
+                let (chosen, u1) = if u1 >= w {
                     (first, (u1 - w) / (1.0 - w))
                 } else {
                     (second, u1 / w)
                 };
-                let s = chosen.sample(wi, u1.min(1.0 - f32::EPSILON), u2, mode)?;
+                let s = chosen.sample(uv, wi, u1.min(1.0 - f32::EPSILON), u2, mode)?;
                 if s.delta {
                     // The choice probability cancels against the blend weight.
                     return Some(s);
                 }
                 // A smooth direction could have come from either lobe: use the mixture density.
-                let pdf = self.pdf(wi, s.wo);
+                let pdf = self.pdf(uv, wi, s.wo);
                 (pdf > 0.0).then(|| BsdfSample {
-                    weight: self.eval(wi, s.wo) / pdf,
+                    weight: self.eval(uv, wi, s.wo) / pdf,
                     pdf,
                     ..s
                 })
             }
             Bsdf::TwoSided(pair) => {
                 if wi.z >= 0.0 {
-                    pair.0.sample(wi, u1, u2, mode)
+                    pair.0.sample(uv, wi, u1, u2, mode)
                 } else {
                     let flip = Vec3A::new(1.0, 1.0, -1.0);
-                    let s = pair.1.sample(wi * flip, u1, u2, mode)?;
+                    let s = pair.1.sample(uv, wi * flip, u1, u2, mode)?;
                     Some(BsdfSample { wo: s.wo * flip, ..s })
                 }
             }
         }
     }
 
-    /// f(wi, wo) · |cos θo| of the non-delta lobes.
-    pub fn eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+    /// f(wi, wo) · |cos θo| of the non-delta lobes at `uv`.
+    pub fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
         match self {
-            Bsdf::Diffuse(b) => b.eval(wi, wo),
-            Bsdf::Conductor(b) => b.eval(wi, wo),
+            Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
+            Bsdf::Conductor(b) => b.eval(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::Null => Rgb::ZERO,
-            Bsdf::Plastic(b) => b.eval(wi, wo),
-            Bsdf::Blend(pair, w) => (1.0 - w) * pair.0.eval(wi, wo) + *w * pair.1.eval(wi, wo),
+            Bsdf::Plastic(b) => b.eval(uv, wi, wo),
+            Bsdf::Blend(pair, w) => {
+                let w = w.at(uv).clamp(0.0, 1.0);
+                (1.0 - w) * pair.0.eval(uv, wi, wo) + w * pair.1.eval(uv, wi, wo)
+            }
             Bsdf::TwoSided(pair) => {
                 let flip = Vec3A::new(1.0, 1.0, -1.0);
                 if wi.z >= 0.0 {
-                    pair.0.eval(wi, wo)
+                    pair.0.eval(uv, wi, wo)
                 } else {
-                    pair.1.eval(wi * flip, wo * flip)
+                    pair.1.eval(uv, wi * flip, wo * flip)
                 }
             }
         }
     }
 
-    /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes.
-    pub fn pdf(&self, wi: Vec3A, wo: Vec3A) -> f32 {
+    /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes at `uv`.
+    pub fn pdf(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> f32 {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
-            Bsdf::Conductor(b) => b.pdf(wi, wo),
+            Bsdf::Conductor(b) => b.pdf(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::Null => 0.0,
             Bsdf::Plastic(b) => b.pdf(wi, wo),
-            Bsdf::Blend(pair, w) => (1.0 - w) * pair.0.pdf(wi, wo) + w * pair.1.pdf(wi, wo),
+            Bsdf::Blend(pair, w) => {
+                let w = w.at(uv).clamp(0.0, 1.0);
+                (1.0 - w) * pair.0.pdf(uv, wi, wo) + w * pair.1.pdf(uv, wi, wo)
+            }
             Bsdf::TwoSided(pair) => {
                 let flip = Vec3A::new(1.0, 1.0, -1.0);
                 if wi.z >= 0.0 {
-                    pair.0.pdf(wi, wo)
+                    pair.0.pdf(uv, wi, wo)
                 } else {
-                    pair.1.pdf(wi * flip, wo * flip)
+                    pair.1.pdf(uv, wi * flip, wo * flip)
                 }
             }
         }

@@ -5,8 +5,9 @@ use glam::{Vec2, Vec3A};
 use super::BsdfSample;
 use super::fresnel::{diffuse_fresnel_reflectance, fresnel_dielectric, reflect, reflect_about};
 use super::microfacet::Microfacet;
-use crate::color::{Rgb, mean};
+use crate::color::Rgb;
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
+use crate::texture::Param;
 
 /// Diffuse base under a dielectric coating (Mitsuba's `plastic` and `roughplastic`).
 ///
@@ -15,9 +16,9 @@ use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_p
 #[derive(Clone, Debug)]
 pub struct Plastic {
     /// Albedo of the base.
-    pub diffuse: Rgb,
+    pub diffuse: Param<Rgb>,
     /// Tint of the coating's reflection.
-    pub specular: Rgb,
+    pub specular: Param<Rgb>,
     /// Coating over exterior index of refraction.
     pub eta: f32,
     /// Mitsuba's `nonlinear`: account for the darkening of the base's colour by internal
@@ -38,13 +39,14 @@ const TABLE_SIZE: usize = 64;
 impl Plastic {
     /// A plastic; for a rough coating, its transmittance is integrated numerically here.
     pub fn new(
-        diffuse: Rgb,
-        specular: Rgb,
+        diffuse: Param<Rgb>,
+        specular: Param<Rgb>,
         eta: f32,
         nonlinear: bool,
         roughness: Option<Microfacet>,
     ) -> Self {
-        let (d, s) = (mean(diffuse), mean(specular));
+        // From the textures' means, as Mitsuba does: the sampling weights do not vary.
+        let (d, s) = (diffuse.mean(), specular.mean());
         let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
         let (internal_reflectance, transmittance_table) = match roughness {
             None => (diffuse_fresnel_reflectance(1.0 / eta), Vec::new()),
@@ -86,11 +88,12 @@ impl Plastic {
         self.transmittance_table[i] * (1.0 - f) + self.transmittance_table[i + 1] * f
     }
 
-    fn diffuse_eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+    fn diffuse_eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+        let diffuse = self.diffuse.at(uv);
         let base = if self.nonlinear {
-            self.diffuse / (Rgb::ONE - self.diffuse * self.internal_reflectance)
+            diffuse / (Rgb::ONE - diffuse * self.internal_reflectance)
         } else {
-            self.diffuse / (1.0 - self.internal_reflectance)
+            diffuse / (1.0 - self.internal_reflectance)
         };
         let inv_eta2 = 1.0 / (self.eta * self.eta);
         base * (self.transmittance(wi.z) * self.transmittance(wo.z) * FRAC_1_PI * inv_eta2 * wo.z)
@@ -106,7 +109,7 @@ impl Plastic {
         (ps / (ps + pd), pd / (ps + pd))
     }
 
-    pub(super) fn sample(&self, wi: Vec3A, u1: f32, u2: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u1: f32, u2: Vec2) -> Option<BsdfSample> {
         if wi.z <= 0.0 {
             return None;
         }
@@ -116,7 +119,7 @@ impl Plastic {
                 let f = fresnel_dielectric(wi.z, self.eta).0;
                 Some(BsdfSample {
                     wo: reflect(wi),
-                    weight: self.specular * (f / ps),
+                    weight: self.specular.at(uv) * (f / ps),
                     pdf: ps,
                     delta: true,
                     eta: 1.0,
@@ -127,7 +130,7 @@ impl Plastic {
                 let pdf = pd * square_to_cosine_hemisphere_pdf(wo);
                 (pdf > 0.0).then(|| BsdfSample {
                     wo,
-                    weight: self.diffuse_eval(wi, wo) / pdf,
+                    weight: self.diffuse_eval(uv, wi, wo) / pdf,
                     pdf,
                     delta: false,
                     eta: 1.0,
@@ -145,7 +148,7 @@ impl Plastic {
                 let pdf = self.pdf(wi, wo);
                 (pdf > 0.0).then(|| BsdfSample {
                     wo,
-                    weight: self.eval(wi, wo) / pdf,
+                    weight: self.eval(uv, wi, wo) / pdf,
                     pdf,
                     delta: false,
                     eta: 1.0,
@@ -154,15 +157,15 @@ impl Plastic {
         }
     }
 
-    pub(super) fn eval(&self, wi: Vec3A, wo: Vec3A) -> Rgb {
+    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Rgb::ZERO;
         }
-        let mut value = self.diffuse_eval(wi, wo);
+        let mut value = self.diffuse_eval(uv, wi, wo);
         if let Some(ggx) = self.roughness {
             let m = (wi + wo).normalize();
             let f = fresnel_dielectric(wi.dot(m), self.eta).0;
-            value += self.specular * (f * ggx.d(m) * ggx.g(wi, wo, m) / (4.0 * wi.z));
+            value += self.specular.at(uv) * (f * ggx.d(m) * ggx.g(wi, wo, m) / (4.0 * wi.z));
         }
         value
     }

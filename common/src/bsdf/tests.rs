@@ -16,8 +16,11 @@ fn conductor_with(distribution: Distribution, alpha: Option<f32>) -> Bsdf {
         // Gold, from Mitsuba's table.
         eta: Rgb::new(0.143036, 0.375307, 1.442045),
         k: Rgb::new(3.982997, 2.385556, 1.603359),
-        specular: Rgb::ONE,
-        roughness: alpha.map(|alpha| Microfacet { distribution, alpha }),
+        specular: Rgb::ONE.into(),
+        roughness: alpha.map(|alpha| Roughness {
+            distribution,
+            alpha: alpha.into(),
+        }),
     })
 }
 
@@ -27,25 +30,50 @@ fn plastic(alpha: Option<f32>, diffuse: f32) -> Bsdf {
 
 fn plastic_with(distribution: Distribution, alpha: Option<f32>, diffuse: f32) -> Bsdf {
     Bsdf::Plastic(Box::new(Plastic::new(
-        Rgb::splat(diffuse),
-        Rgb::ONE,
+        Rgb::splat(diffuse).into(),
+        Rgb::ONE.into(),
         1.49,
         false,
         alpha.map(|alpha| Microfacet { distribution, alpha }),
     )))
 }
 
+/// Where the tests evaluate textured parameters.
+const UV: Vec2 = Vec2::new(0.3, 0.7);
+
+/// A rough conductor whose roughness comes from a 2 × 2 bitmap.
+fn textured_conductor() -> Bsdf {
+    use crate::texture::{Bitmap, Filter, Texture, Wrap};
+    let texels = [0.05, 0.2, 0.4, 0.7].map(Rgb::splat).to_vec();
+    let bitmap = Bitmap::from_texels(
+        2,
+        2,
+        texels,
+        Filter::Bilinear,
+        Wrap::Repeat,
+        glam::Affine2::IDENTITY,
+    );
+    let Bsdf::Conductor(mut c) = conductor(Some(0.1)) else {
+        unreachable!()
+    };
+    c.roughness = Some(Roughness {
+        distribution: Distribution::Ggx,
+        alpha: Param::Textured(std::sync::Arc::new(Texture::Bitmap(bitmap))),
+    });
+    Bsdf::Conductor(c)
+}
+
 fn diffuse(r: f32) -> Bsdf {
     Bsdf::Diffuse(Diffuse {
-        reflectance: Rgb::splat(r),
+        reflectance: Rgb::splat(r).into(),
     })
 }
 
 fn glass() -> Bsdf {
     Bsdf::Dielectric(Dielectric {
         eta: 1.5,
-        specular_reflectance: Rgb::ONE,
-        specular_transmittance: Rgb::ONE,
+        specular_reflectance: Rgb::ONE.into(),
+        specular_transmittance: Rgb::ONE.into(),
     })
 }
 
@@ -72,7 +100,19 @@ fn cases() -> Vec<(&'static str, Bsdf)> {
         ("rough plastic 0.6", plastic(Some(0.6), 0.8)),
         (
             "blend diffuse/rough conductor",
-            Bsdf::Blend(Box::new((diffuse(0.8), conductor(Some(0.3)))), 0.4),
+            Bsdf::Blend(Box::new((diffuse(0.8), conductor(Some(0.3)))), 0.4.into()),
+        ),
+        (
+            // Textures at the test's (u, v): a checkerboard weight, a bitmap roughness.
+            "textured blend of diffuse and rough conductor",
+            Bsdf::Blend(
+                Box::new((diffuse(0.8), textured_conductor())),
+                Param::Textured(std::sync::Arc::new(crate::texture::Texture::Checkerboard {
+                    color0: Rgb::splat(0.3),
+                    color1: Rgb::splat(0.9),
+                    to_uv: glam::Affine2::IDENTITY,
+                })),
+            ),
         ),
         (
             "twosided diffuse/plastic",
@@ -115,7 +155,7 @@ fn expected_probabilities(b: &Bsdf, wi: Vec3A) -> Vec<f64> {
                     let phi = (p as f32 + (j as f32 + 0.5) / sub as f32) * dphi - PI;
                     let s = (1.0 - z * z).max(0.0).sqrt();
                     let wo = Vec3A::new(s * phi.cos(), s * phi.sin(), z);
-                    sum += b.pdf(wi, wo) as f64;
+                    sum += b.pdf(UV, wi, wo) as f64;
                 }
             }
             out[t * PHI_BINS + p] = sum / (sub * sub) as f64 * (dz * dphi) as f64;
@@ -133,7 +173,7 @@ fn sampled_directions_follow_the_pdf() {
             let mut counts = vec![0f64; THETA_BINS * PHI_BINS];
             for _ in 0..n {
                 let u1 = s.next_1d();
-                if let Some(bs) = b.sample(wi, u1, s.next_2d(), TransportMode::Radiance)
+                if let Some(bs) = b.sample(UV, wi, u1, s.next_2d(), TransportMode::Radiance)
                     && !bs.delta
                 {
                     counts[bin_of(bs.wo)] += 1.0;
@@ -184,13 +224,13 @@ fn sample_weights_equal_eval_over_pdf() {
             let mut s = Sampler::new(12, Stream::Camera, k as u64, 0);
             for _ in 0..2000 {
                 let u1 = s.next_1d();
-                let Some(bs) = b.sample(wi, u1, s.next_2d(), TransportMode::Radiance) else {
+                let Some(bs) = b.sample(UV, wi, u1, s.next_2d(), TransportMode::Radiance) else {
                     continue;
                 };
                 if bs.delta {
                     continue;
                 }
-                let expect = b.eval(wi, bs.wo) / b.pdf(wi, bs.wo);
+                let expect = b.eval(UV, wi, bs.wo) / b.pdf(UV, wi, bs.wo);
                 let err = (bs.weight - expect).abs().max_element() / expect.max_element().max(1e-3);
                 assert!(err < 1e-3, "{name}: weight {} but eval/pdf {}", bs.weight, expect);
             }
@@ -208,8 +248,8 @@ fn reflection_is_reciprocal() {
             if a.z < 1e-3 || c.z < 1e-3 {
                 continue;
             }
-            let f_ac = b.eval(a, c) / c.z;
-            let f_ca = b.eval(c, a) / a.z;
+            let f_ac = b.eval(UV, a, c) / c.z;
+            let f_ca = b.eval(UV, c, a) / a.z;
             let scale = f_ac.max_element().max(f_ca.max_element()).max(1e-4);
             assert!(
                 (f_ac - f_ca).abs().max_element() / scale < 1e-3,
@@ -231,7 +271,7 @@ fn white_furnace_never_creates_energy() {
         Bsdf::Conductor(Conductor {
             eta: Rgb::ZERO,
             k: Rgb::ONE,
-            specular: Rgb::ONE,
+            specular: Rgb::ONE.into(),
             roughness: None,
         }),
     ));
@@ -243,7 +283,7 @@ fn white_furnace_never_creates_energy() {
             for _ in 0..n {
                 let u1 = s.next_1d();
                 // Importance transport: no radiance compression, so albedo is energy.
-                if let Some(bs) = b.sample(wi, u1, s.next_2d(), TransportMode::Importance) {
+                if let Some(bs) = b.sample(UV, wi, u1, s.next_2d(), TransportMode::Importance) {
                     sum += bs.weight;
                 }
             }
@@ -263,10 +303,13 @@ fn white_furnace_never_creates_energy() {
 #[test]
 fn smooth_lobes_have_no_density() {
     let wi = Vec3A::new(0.0, 0.6, 0.8);
-    assert_eq!(glass().pdf(wi, Vec3A::Z), 0.0);
-    assert_eq!(conductor(None).eval(wi, Vec3A::new(0.0, -0.6, 0.8)), Rgb::ZERO);
+    assert_eq!(glass().pdf(UV, wi, Vec3A::Z), 0.0);
+    assert_eq!(
+        conductor(None).eval(UV, wi, Vec3A::new(0.0, -0.6, 0.8)),
+        Rgb::ZERO
+    );
     let s = glass()
-        .sample(wi, 0.99, Vec2::ZERO, TransportMode::Radiance)
+        .sample(UV, wi, 0.99, Vec2::ZERO, TransportMode::Radiance)
         .unwrap();
     assert!(s.delta && s.wo.z < 0.0);
 }

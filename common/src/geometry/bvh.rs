@@ -272,6 +272,7 @@ mod tests {
                     radius: 0.05 + 0.3 * s.next_1d(),
                     shape: i as u32,
                     flip: false,
+                    rotation: glam::Quat::IDENTITY,
                 })
             })
             .collect()
@@ -304,6 +305,7 @@ mod tests {
                     radius: 0.1 * l,
                     shape: i as u32,
                     flip: false,
+                    rotation: glam::Quat::IDENTITY,
                 })
             })
             .collect()

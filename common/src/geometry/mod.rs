@@ -52,6 +52,8 @@ pub struct SurfacePoint {
     pub ns: Vec3A,
     /// Which shape was hit.
     pub shape: u32,
+    /// Texture coordinates, parameterised as Mitsuba's shapes are.
+    pub uv: glam::Vec2,
 }
 
 impl SurfacePoint {
@@ -63,6 +65,7 @@ impl SurfacePoint {
             ng: Vec3A::ZERO,
             ns: Vec3A::ZERO,
             shape: u32::MAX,
+            uv: glam::Vec2::ZERO,
         }
     }
 }

@@ -1,4 +1,4 @@
-use glam::Vec3A;
+use glam::{Quat, Vec2, Vec3A};
 
 use super::{Aabb, Ray, SurfacePoint, gamma};
 
@@ -13,6 +13,8 @@ pub struct Sphere {
     pub shape: u32,
     /// Whether normals point inwards (`flip_normals`).
     pub flip: bool,
+    /// The rotation of its `to_world`, which orients its texture coordinates.
+    pub rotation: Quat,
 }
 
 impl Sphere {
@@ -70,6 +72,17 @@ impl Sphere {
         let local = n * self.radius;
         let p = self.center + local;
         let p_err = gamma(5) * local.abs() + gamma(1) * p.abs() + gamma(1) * self.center.abs();
+        // Mitsuba's parameterisation: u the longitude about the local z axis from +x, v the
+        // colatitude from +z.
+        let l = self.rotation.inverse() * glam::Vec3::from(n);
+        let mut phi = l.y.atan2(l.x);
+        if phi < 0.0 {
+            phi += 2.0 * std::f32::consts::PI;
+        }
+        let uv = Vec2::new(
+            phi * std::f32::consts::FRAC_1_PI * 0.5,
+            l.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
+        );
         let n = if self.flip { -n } else { n };
         SurfacePoint {
             p,
@@ -77,6 +90,7 @@ impl Sphere {
             ng: n,
             ns: n,
             shape: self.shape,
+            uv,
         }
     }
 }
@@ -92,6 +106,7 @@ mod tests {
             radius: 1.0,
             shape: 0,
             flip: false,
+            rotation: Quat::IDENTITY,
         };
         let r = Ray::new(Vec3A::ZERO, -Vec3A::Z);
         assert!((s.intersect(&r, f32::INFINITY).unwrap() - 4.0).abs() < 1e-5);

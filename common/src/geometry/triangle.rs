@@ -1,4 +1,4 @@
-use glam::Vec3A;
+use glam::{Vec2, Vec3A};
 
 use super::{Aabb, Ray, SurfacePoint, gamma};
 
@@ -9,6 +9,9 @@ pub struct Triangle {
     pub p: [Vec3A; 3],
     /// Vertex normals for smooth shading, if the mesh has them.
     pub n: Option<Box<[Vec3A; 3]>>,
+    /// Vertex texture coordinates, if the mesh has them (otherwise (u, v) is the barycentric
+    /// position (b1, b2), as in Mitsuba).
+    pub uv: Option<Box<[Vec2; 3]>>,
     /// Shape index.
     pub shape: u32,
     /// Whether the shape's normals are flipped (`flip_normals`).
@@ -80,6 +83,10 @@ impl Triangle {
             ng,
             ns,
             shape: self.shape,
+            uv: match &self.uv {
+                Some(t) => b0 * t[0] + b1 * t[1] + b2 * t[2],
+                None => Vec2::new(b1, b2),
+            },
         }
     }
 }
@@ -96,6 +103,7 @@ mod tests {
                 Vec3A::new(0.0, 1.0, 0.0),
             ],
             n: None,
+            uv: None,
             shape: 0,
             flip: false,
         }

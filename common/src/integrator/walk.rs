@@ -151,7 +151,7 @@ impl Walk {
     pub fn sample_bsdf(hit: &Hit, sampler: &mut Sampler, mode: TransportMode) -> Option<BsdfSample> {
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        hit.bsdf.sample(hit.wo_local, u1, u2, mode)
+        hit.bsdf.sample(hit.sp.uv, hit.wo_local, u1, u2, mode)
     }
 
     /// Bounces off `hit` along the sampled direction: the throughput takes the sample's

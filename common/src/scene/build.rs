@@ -2,6 +2,7 @@
 
 use std::collections::HashMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use glam::{Mat3A, Mat4, Vec3A};
 
@@ -10,7 +11,7 @@ use super::named;
 use super::props::{Ctx, FileRoot, Props, Res};
 use super::xml::{self, Element};
 use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
-use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic};
+use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, Roughness};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::filter::Filter;
@@ -19,6 +20,7 @@ use crate::geometry::{Bvh, Primitive, Sphere, Triangle};
 use crate::light::{AreaLight, BeamLight, Light, PointLight, SpotLight};
 use crate::medium::{Medium, Phase};
 use crate::sampling::Distribution1D;
+use crate::texture::{Bitmap, Filter as TexFilter, Param, Texture, Wrap};
 
 pub(super) fn load(path: &Path, defines: &[(String, String)], root: FileRoot) -> Result<Scene, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError {
@@ -88,6 +90,8 @@ struct Builder<'a> {
     files: Vec<std::path::PathBuf>,
     /// The sensor's far clipping distance, checked against the scene's extent.
     far_clip: f32,
+    /// Top-level textures, by id.
+    texture_ids: HashMap<String, Arc<Texture>>,
     /// Ids of top-level area emitters (shapes refer to them).
     area_ids: std::collections::HashSet<String>,
     /// Those a shape has taken: each belongs to one shape.
@@ -111,6 +115,7 @@ impl<'a> Builder<'a> {
             warnings: Vec::new(),
             files: Vec::new(),
             far_clip: f32::INFINITY,
+            texture_ids: HashMap::new(),
             area_ids: Default::default(),
             area_taken: Default::default(),
         }
@@ -131,12 +136,24 @@ impl<'a> Builder<'a> {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
         }
+        for el in root.children.iter().filter(|e| e.tag == "texture") {
+            let Some(id) = el.attr("id") else {
+                return Err(ctx.err(el, "a top-level <texture> needs an id to be referred to"));
+            };
+            let texture = Arc::new(self.texture(el)?);
+            if self.texture_ids.insert(id.to_string(), texture).is_some() || self.medium_ids.contains_key(id)
+            {
+                return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
+            }
+        }
         for el in root.children.iter().filter(|e| e.tag == "bsdf") {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
             if let Some(id) = el.attr("id")
-                && (self.bsdf_ids.insert(id.to_string(), index).is_some() || self.medium_ids.contains_key(id))
+                && (self.bsdf_ids.insert(id.to_string(), index).is_some()
+                    || self.medium_ids.contains_key(id)
+                    || self.texture_ids.contains_key(id))
             {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
@@ -157,7 +174,7 @@ impl<'a> Builder<'a> {
         self.area_ids = area_ids.keys().cloned().collect();
         for el in &root.children {
             match el.tag.as_str() {
-                "bsdf" | "medium" => {}
+                "bsdf" | "medium" | "texture" => {}
                 "shape" => self.shape(el, &area_ids)?,
                 "emitter" if el.attr("type") == Some("area") && el.attr("id").is_some() => {}
                 "emitter" => self.emitter(el)?,
@@ -614,8 +631,11 @@ impl<'a> Builder<'a> {
             .objects("ref")
             .into_iter()
             .filter(|c| {
-                !c.attr("id")
-                    .is_some_and(|id| self.medium_ids.contains_key(id) || self.area_ids.contains(id))
+                !c.attr("id").is_some_and(|id| {
+                    self.medium_ids.contains_key(id)
+                        || self.area_ids.contains(id)
+                        || self.texture_ids.contains_key(id)
+                })
             })
             .collect();
         for c in p.objects("bsdf").into_iter().chain(refs) {
@@ -710,7 +730,7 @@ impl<'a> Builder<'a> {
         let p = Props::new(self.ctx, el)?;
         let bsdf = match p.kind()? {
             "diffuse" => Bsdf::Diffuse(Diffuse {
-                reflectance: p.reflectance("reflectance", Rgb::splat(0.5))?,
+                reflectance: self.color_param(&p, "reflectance", Rgb::splat(0.5))?,
             }),
             kind @ ("conductor" | "roughconductor") => {
                 let (eta, k) = match (p.rgb("eta")?, p.rgb("k")?, p.string("material")?) {
@@ -726,9 +746,9 @@ impl<'a> Builder<'a> {
                 Bsdf::Conductor(Conductor {
                     eta,
                     k,
-                    specular: p.reflectance("specular_reflectance", Rgb::ONE)?,
+                    specular: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
                     roughness: if kind == "roughconductor" {
-                        Some(self.microfacet(&p)?)
+                        Some(self.roughness(&p)?)
                     } else {
                         None
                     },
@@ -736,8 +756,8 @@ impl<'a> Builder<'a> {
             }
             "dielectric" => Bsdf::Dielectric(Dielectric {
                 eta: self.relative_ior(&p, "bk7")?,
-                specular_reflectance: p.reflectance("specular_reflectance", Rgb::ONE)?,
-                specular_transmittance: p.reflectance("specular_transmittance", Rgb::ONE)?,
+                specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
             }),
             kind @ ("plastic" | "roughplastic") => {
                 let roughness = if kind == "roughplastic" {
@@ -746,8 +766,8 @@ impl<'a> Builder<'a> {
                     None
                 };
                 Bsdf::Plastic(Box::new(Plastic::new(
-                    p.reflectance("diffuse_reflectance", Rgb::splat(0.5))?,
-                    p.reflectance("specular_reflectance", Rgb::ONE)?,
+                    self.color_param(&p, "diffuse_reflectance", Rgb::splat(0.5))?,
+                    self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
                     self.relative_ior(&p, "polypropylene")?,
                     p.boolean("nonlinear")?.unwrap_or(false),
                     roughness,
@@ -773,8 +793,10 @@ impl<'a> Builder<'a> {
             }
             "null" => Bsdf::Null,
             "blendbsdf" => {
-                let w = p.float_or("weight", 0.5)?;
-                if !(0.0..=1.0).contains(&w) {
+                let w = self.float_param(&p, "weight", 0.5)?;
+                if let Param::Fixed(w) = w
+                    && !(0.0..=1.0).contains(&w)
+                {
                     return Err(p.err_at("weight", format!("weight must lie in [0, 1], not {w}")));
                 }
                 let mut nested = self.nested_bsdfs(&p)?;
@@ -799,6 +821,126 @@ impl<'a> Builder<'a> {
         };
         p.finish()?;
         Ok(bsdf)
+    }
+
+    /// A rough conductor's microfacets, whose `alpha` may be a texture.
+    fn roughness(&mut self, p: &Props) -> Res<Roughness> {
+        let textured = ["alpha", "alpha_u", "alpha_v"]
+            .into_iter()
+            .find_map(|name| self.texture_param(p, name).transpose().map(|t| (name, t)));
+        match textured {
+            Some((name, texture)) => {
+                if name != "alpha" {
+                    return Err(p.err_at(
+                        name,
+                        "a texture for alpha_u or alpha_v (anisotropic roughness) is not supported".into(),
+                    ));
+                }
+                let mf = self.microfacet(p)?;
+                Ok(Roughness {
+                    distribution: mf.distribution,
+                    alpha: Param::Textured(texture?),
+                })
+            }
+            None => {
+                let mf = self.microfacet(p)?;
+                Ok(Roughness {
+                    distribution: mf.distribution,
+                    alpha: Param::Fixed(mf.alpha),
+                })
+            }
+        }
+    }
+
+    /// A texture given for parameter `name`: nested (`<texture name=...>`) or a `<ref>` to a
+    /// top-level one.
+    fn texture_param(&mut self, p: &Props, name: &str) -> Res<Option<Arc<Texture>>> {
+        if let Some(el) = p.named_object("texture", name) {
+            return Ok(Some(Arc::new(self.texture(el)?)));
+        }
+        if let Some(el) = p.named_object("ref", name) {
+            let id = el
+                .attr("id")
+                .ok_or_else(|| self.ctx.err(el, "a <ref> needs an id"))?;
+            return match self.texture_ids.get(id) {
+                Some(t) => Ok(Some(t.clone())),
+                None => Err(self.ctx.err(el, format!("no <texture> with id \"{id}\""))),
+            };
+        }
+        Ok(None)
+    }
+
+    /// A colour parameter of a material: a texture, or a reflectance in [0, 1].
+    fn color_param(&mut self, p: &Props, name: &str, default: Rgb) -> Res<Param<Rgb>> {
+        match self.texture_param(p, name)? {
+            Some(t) => Ok(Param::Textured(t)),
+            None => Ok(Param::Fixed(p.reflectance(name, default)?)),
+        }
+    }
+
+    /// A number parameter of a material: a texture, or a number.
+    fn float_param(&mut self, p: &Props, name: &str, default: f32) -> Res<Param<f32>> {
+        match self.texture_param(p, name)? {
+            Some(t) => Ok(Param::Textured(t)),
+            None => Ok(Param::Fixed(p.float_or(name, default)?)),
+        }
+    }
+
+    /// A `<texture>`: Mitsuba's `bitmap` or `checkerboard`.
+    fn texture(&mut self, el: &Element) -> Res<Texture> {
+        let p = Props::new(self.ctx, el)?;
+        let to_uv = match p.transform("to_uv")? {
+            Some(m) => uv_transform(&m),
+            None => glam::Affine2::IDENTITY,
+        };
+        let texture = match p.kind()? {
+            "bitmap" => {
+                let name = p
+                    .string("filename")?
+                    .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
+                let path = p.resolve_file("filename", name)?;
+                let filter = match p.string("filter_type")? {
+                    None | Some("bilinear") => TexFilter::Bilinear,
+                    Some("nearest") => TexFilter::Nearest,
+                    Some(f) => {
+                        return Err(p.err_at(
+                            "filter_type",
+                            format!("filter_type \"{f}\" is not supported (bilinear, nearest)"),
+                        ));
+                    }
+                };
+                let wrap = match p.string("wrap_mode")? {
+                    None | Some("repeat") => Wrap::Repeat,
+                    Some("mirror") => Wrap::Mirror,
+                    Some("clamp") => Wrap::Clamp,
+                    Some(w) => {
+                        return Err(p.err_at(
+                            "wrap_mode",
+                            format!("wrap_mode \"{w}\" is not supported (repeat, mirror, clamp)"),
+                        ));
+                    }
+                };
+                let raw = p.boolean("raw")?.unwrap_or(false);
+                // Storage precision and GPU filtering in Mitsuba: no effect on the values.
+                let _ = (p.string("format")?, p.boolean("accel")?);
+                let bitmap = Bitmap::load(&path, raw, filter, wrap, to_uv)
+                    .map_err(|e| p.err_at("filename", format!("{}: {e}", path.display())))?;
+                Texture::Bitmap(bitmap)
+            }
+            "checkerboard" => Texture::Checkerboard {
+                color0: p.reflectance("color0", Rgb::splat(0.4))?,
+                color1: p.reflectance("color1", Rgb::splat(0.2))?,
+                to_uv,
+            },
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("texture type \"{other}\" is not supported (bitmap, checkerboard)"),
+                ));
+            }
+        };
+        p.finish()?;
+        Ok(texture)
     }
 
     /// A rough material's microfacets: Mitsuba's `distribution` (default Beckmann) and `alpha`
@@ -872,7 +1014,7 @@ impl<'a> Builder<'a> {
                 let m = to_world
                     * Mat4::from_translation(center.into())
                     * Mat4::from_scale(glam::Vec3::splat(radius));
-                let (scale, _, translation) = m.to_scale_rotation_translation();
+                let (scale, rotation, translation) = m.to_scale_rotation_translation();
                 if (scale.x - scale.y).abs() > 1e-4 * scale.x || (scale.x - scale.z).abs() > 1e-4 * scale.x {
                     return Err(self.ctx.err(el, "a sphere's to_world must scale uniformly"));
                 }
@@ -881,6 +1023,7 @@ impl<'a> Builder<'a> {
                     radius: scale.x.abs(),
                     shape: index,
                     flip,
+                    rotation,
                 }));
                 None
             }
@@ -904,6 +1047,10 @@ impl<'a> Builder<'a> {
                     }
                 }
                 .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
+                // Mitsuba mirrors v on OBJ files unless told not to, and on PLY files if told.
+                if kind != "serialized" && p.boolean("flip_tex_coords")?.unwrap_or(kind == "obj") {
+                    m.flip_tex_coords();
+                }
                 face_normals = p.boolean("face_normals")?.unwrap_or(false);
                 if face_normals {
                     m.normals = None;
@@ -959,10 +1106,10 @@ impl<'a> Builder<'a> {
             // Mitsuba's defaults: an emitter absorbs what reaches it; anything else, a medium's
             // boundary included, is grey (a boundary must say <bsdf type="null"/>).
             0 if emitter.is_some() => Bsdf::Diffuse(Diffuse {
-                reflectance: Rgb::ZERO,
+                reflectance: Param::Fixed(Rgb::ZERO),
             }),
             0 => Bsdf::Diffuse(Diffuse {
-                reflectance: Rgb::splat(0.5),
+                reflectance: Param::Fixed(Rgb::splat(0.5)),
             }),
             1 => nested.into_iter().next().expect("one element"),
             _ => return Err(self.ctx.err(el, "a shape takes one bsdf")),
@@ -1002,8 +1149,14 @@ impl<'a> Builder<'a> {
                 .normals
                 .as_ref()
                 .map(|ns| Box::new(t.map(|i| ns[i as usize])));
-            self.prims
-                .push(Primitive::Triangle(Triangle { p, n, shape, flip }));
+            let uv = mesh.uvs.as_ref().map(|uvs| Box::new(t.map(|i| uvs[i as usize])));
+            self.prims.push(Primitive::Triangle(Triangle {
+                p,
+                n,
+                uv,
+                shape,
+                flip,
+            }));
         }
     }
 
@@ -1094,4 +1247,14 @@ impl<'a> Builder<'a> {
         self.light_media.push(medium);
         Ok(())
     }
+}
+
+/// The 2D part of a `to_uv` transform (Mitsuba applies the 4x4 matrix to (u, v, 0, 1) and keeps
+/// (x, y)).
+fn uv_transform(m: &Mat4) -> glam::Affine2 {
+    glam::Affine2::from_cols(
+        glam::Vec2::new(m.x_axis.x, m.x_axis.y),
+        glam::Vec2::new(m.y_axis.x, m.y_axis.y),
+        glam::Vec2::new(m.w_axis.x, m.w_axis.y),
+    )
 }

@@ -4,7 +4,7 @@
 use std::f32::consts::PI;
 use std::path::Path;
 
-use glam::{Mat4, Vec3A};
+use glam::{Mat4, Vec2, Vec3A};
 
 /// An indexed triangle mesh in object or world space.
 #[derive(Clone, Debug, Default)]
@@ -12,6 +12,8 @@ pub(crate) struct Mesh {
     pub positions: Vec<Vec3A>,
     /// Per-vertex normals, if the mesh has them (smooth shading).
     pub normals: Option<Vec<Vec3A>>,
+    /// Per-vertex texture coordinates, if the mesh has them.
+    pub uvs: Option<Vec<Vec2>>,
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -74,7 +76,22 @@ impl Mesh {
         {
             return Err("the number of normals differs from the number of vertices".into());
         }
+        if let Some(uvs) = &self.uvs {
+            if uvs.len() != self.positions.len() {
+                return Err("the number of texture coordinates differs from the number of vertices".into());
+            }
+            if uvs.iter().any(|uv| !uv.is_finite()) {
+                return Err("a texture coordinate is not finite".into());
+            }
+        }
         Ok(())
+    }
+
+    /// Mirrors the texture coordinates' v (Mitsuba's `flip_tex_coords`).
+    pub fn flip_tex_coords(&mut self) {
+        for uv in self.uvs.iter_mut().flatten() {
+            uv.y = 1.0 - uv.y;
+        }
     }
 }
 
@@ -88,13 +105,20 @@ pub(crate) fn rectangle() -> Mesh {
             Vec3A::new(-1.0, 1.0, 0.0),
         ],
         normals: None,
+        uvs: Some(vec![
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(0.0, 1.0),
+        ]),
         triangles: vec![[0, 1, 2], [0, 2, 3]],
     }
 }
 
-/// [-1, 1]³ with outward faces.
+/// [-1, 1]³ with outward faces, with Mitsuba's texture coordinates on each face.
 pub(crate) fn cube() -> Mesh {
     let mut mesh = Mesh::default();
+    let mut uvs = Vec::new();
     for axis in 0..3 {
         for sign in [1.0f32, -1.0] {
             let n = Vec3A::AXES[axis] * sign;
@@ -103,34 +127,60 @@ pub(crate) fn cube() -> Mesh {
             let (u, v) = if sign > 0.0 { (a, b) } else { (b, a) };
             let base = mesh.positions.len() as u32;
             for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                mesh.positions.push(n + su * u + sv * v);
+                let p = n + su * u + sv * v;
+                mesh.positions.push(p);
+                uvs.push(cube_uv(axis, sign, p));
             }
             mesh.triangles.push([base, base + 1, base + 2]);
             mesh.triangles.push([base, base + 2, base + 3]);
         }
     }
+    mesh.uvs = Some(uvs);
     mesh
+}
+
+/// Mitsuba's (u, v) on the cube face with normal `sign` along `axis`, at `p`: each face's
+/// coordinates are affine in the position (read off its `cube` shape's 24 vertices).
+fn cube_uv(axis: usize, sign: f32, p: Vec3A) -> Vec2 {
+    let h = |x: f32| (x + 1.0) * 0.5;
+    let (x, y, z) = (p.x, p.y, p.z);
+    match (axis, sign > 0.0) {
+        (1, false) => Vec2::new(h(z), h(x)),
+        (1, true) => Vec2::new(h(-x), h(-z)),
+        (0, true) => Vec2::new(h(y), h(-z)),
+        (2, true) => Vec2::new(h(y), h(x)),
+        (0, false) => Vec2::new(h(y), h(z)),
+        _ => Vec2::new(h(-y), h(x)),
+    }
 }
 
 /// The unit disk in the z = 0 plane, facing +z, as a fan of triangles whose total area is
 /// exactly π (the rim radius is enlarged slightly to make up for the polygon's missing area).
+/// Texture coordinates are Mitsuba's (radius, angle / 2π); each triangle has its own vertices,
+/// so that the angle does not jump inside the last one.
 pub(crate) fn disk() -> Mesh {
     const SEGMENTS: u32 = 256;
     let polygon_area = 0.5 * SEGMENTS as f32 * (2.0 * PI / SEGMENTS as f32).sin();
     let r = (PI / polygon_area).sqrt();
-    let mut positions = vec![Vec3A::ZERO];
+    let mut mesh = Mesh::default();
+    let mut uvs = Vec::new();
     for i in 0..SEGMENTS {
-        let phi = 2.0 * PI * i as f32 / SEGMENTS as f32;
-        positions.push(Vec3A::new(r * phi.cos(), r * phi.sin(), 0.0));
+        let (t0, t1) = (i as f32 / SEGMENTS as f32, (i + 1) as f32 / SEGMENTS as f32);
+        let rim = |t: f32| {
+            let phi = 2.0 * PI * t;
+            Vec3A::new(r * phi.cos(), r * phi.sin(), 0.0)
+        };
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend([Vec3A::ZERO, rim(t0), rim(t1)]);
+        uvs.extend([
+            Vec2::new(0.0, 0.5 * (t0 + t1)),
+            Vec2::new(1.0, t0),
+            Vec2::new(1.0, t1),
+        ]);
+        mesh.triangles.push([base, base + 1, base + 2]);
     }
-    let triangles = (0..SEGMENTS)
-        .map(|i| [0, 1 + i, 1 + (i + 1) % SEGMENTS])
-        .collect();
-    Mesh {
-        positions,
-        normals: None,
-        triangles,
-    }
+    mesh.uvs = Some(uvs);
+    mesh
 }
 
 /// A Wavefront OBJ file (all its objects as one mesh), triangulated.
@@ -144,6 +194,8 @@ pub(crate) fn load_obj(path: &Path) -> Result<Mesh, String> {
     let mut mesh = Mesh::default();
     let mut normals = Vec::new();
     let mut all_have_normals = true;
+    let mut uvs = Vec::new();
+    let mut all_have_uvs = true;
     for m in models {
         let base = mesh.positions.len() as u32;
         let pos = &m.mesh.positions;
@@ -159,6 +211,11 @@ pub(crate) fn load_obj(path: &Path) -> Result<Mesh, String> {
         } else {
             all_have_normals = false;
         }
+        if m.mesh.texcoords.len() / 2 == pos.len() / 3 {
+            uvs.extend(m.mesh.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])));
+        } else {
+            all_have_uvs = false;
+        }
         mesh.triangles.extend(
             m.mesh
                 .indices
@@ -168,6 +225,9 @@ pub(crate) fn load_obj(path: &Path) -> Result<Mesh, String> {
     }
     if all_have_normals && !normals.is_empty() {
         mesh.normals = Some(normals);
+    }
+    if all_have_uvs && !uvs.is_empty() {
+        mesh.uvs = Some(uvs);
     }
     Ok(mesh)
 }
@@ -189,6 +249,7 @@ pub(crate) fn load_ply(path: &Path) -> Result<Mesh, String> {
         .ok_or("PLY file has no vertex element")?;
     let mut mesh = Mesh::default();
     let mut normals = Vec::with_capacity(vertices.len());
+    let mut uvs = Vec::with_capacity(vertices.len());
     for v in vertices {
         let (Some(x), Some(y), Some(z)) = (scalar(v, "x"), scalar(v, "y"), scalar(v, "z")) else {
             return Err("a PLY vertex lacks x, y or z".into());
@@ -197,9 +258,19 @@ pub(crate) fn load_ply(path: &Path) -> Result<Mesh, String> {
         if let (Some(nx), Some(ny), Some(nz)) = (scalar(v, "nx"), scalar(v, "ny"), scalar(v, "nz")) {
             normals.push(Vec3A::new(nx, ny, nz));
         }
+        // Mitsuba's names for texture coordinates.
+        if let Some((u, v)) = [("u", "v"), ("texture_u", "texture_v"), ("s", "t")]
+            .into_iter()
+            .find_map(|(name_u, name_v)| Some((scalar(v, name_u)?, scalar(v, name_v)?)))
+        {
+            uvs.push(Vec2::new(u, v));
+        }
     }
     if normals.len() == mesh.positions.len() && !normals.is_empty() {
         mesh.normals = Some(normals);
+    }
+    if uvs.len() == mesh.positions.len() && !uvs.is_empty() {
+        mesh.uvs = Some(uvs);
     }
     for f in ply.payload.get("face").map(Vec::as_slice).unwrap_or_default() {
         let idx = f
@@ -292,9 +363,15 @@ pub(crate) fn load_serialized(path: &Path, shape_index: u32) -> Result<Mesh, Str
     } else {
         None
     };
-    if flags & 2 != 0 {
-        r.bytes(2 * scalar * vertices)?; // texture coordinates: no textures yet
-    }
+    let uvs = if flags & 2 != 0 {
+        Some(
+            (0..vertices)
+                .map(|_| Ok(Vec2::new(r.real(double)?, r.real(double)?)))
+                .collect::<Result<Vec<_>, String>>()?,
+        )
+    } else {
+        None
+    };
     if flags & 8 != 0 {
         r.bytes(3 * scalar * vertices)?; // vertex colours: Mitsuba drops them too
     }
@@ -304,6 +381,7 @@ pub(crate) fn load_serialized(path: &Path, shape_index: u32) -> Result<Mesh, Str
     Ok(Mesh {
         positions,
         normals,
+        uvs,
         triangles,
     })
 }
@@ -356,6 +434,24 @@ mod tests {
         assert!((area(&rectangle()) - 4.0).abs() < 1e-5);
         assert!((area(&cube()) - 24.0).abs() < 1e-4);
         assert!((area(&disk()) - PI).abs() < 1e-4);
+        // Mitsuba's cube: a vertex of each face with its (u, v).
+        for (p, n, uv) in [
+            ((1.0, -1.0, 1.0), 0, (1.0, 1.0)),
+            ((-1.0, 1.0, -1.0), 1, (1.0, 1.0)),
+            ((1.0, 1.0, 1.0), 2, (1.0, 0.0)),
+            ((-1.0, 1.0, 1.0), 3, (1.0, 0.0)),
+            ((-1.0, 1.0, -1.0), 4, (1.0, 0.0)),
+            ((-1.0, -1.0, -1.0), 5, (1.0, 0.0)),
+            ((1.0, -1.0, -1.0), 0, (0.0, 1.0)),
+            ((1.0, 1.0, 1.0), 1, (0.0, 0.0)),
+            ((1.0, -1.0, 1.0), 3, (0.0, 1.0)),
+            ((1.0, 1.0, -1.0), 5, (0.0, 1.0)),
+        ] {
+            let p = Vec3A::new(p.0, p.1, p.2);
+            // Face n of Mitsuba's table: -y, +y, +x, +z, -x, -z.
+            let (axis, sign) = [(1, -1.0), (1, 1.0), (0, 1.0), (2, 1.0), (0, -1.0), (2, -1.0)][n];
+            assert_eq!(cube_uv(axis, sign, p), Vec2::new(uv.0, uv.1), "face {n} at {p}");
+        }
         // Every cube face points away from the centre.
         let c = cube();
         for t in &c.triangles {

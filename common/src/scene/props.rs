@@ -312,6 +312,17 @@ impl<'a> Props<'a> {
             .collect()
     }
 
+    /// The nested element with this tag and `name` attribute (a texture given for a
+    /// parameter), if any.
+    pub fn named_object(&self, tag: &str, name: &str) -> Option<&'a Element> {
+        let (el, used) = self
+            .objects
+            .iter()
+            .find(|(el, _)| el.tag == tag && el.attr("name") == Some(name))?;
+        used.set(true);
+        Some(*el)
+    }
+
     /// At most one nested element with this tag.
     pub fn object(&self, tag: &str) -> Res<Option<&'a Element>> {
         let all = self.objects(tag);

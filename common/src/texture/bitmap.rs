@@ -1,0 +1,207 @@
+//! Mitsuba's `bitmap` texture: an image file looked up at (u, v), with bilinear or nearest
+//! filtering and repeat, mirror or clamp wrapping.
+
+use std::path::Path;
+
+use glam::{Affine2, Vec2};
+
+use crate::color::Rgb;
+
+/// How texels are interpolated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Filter {
+    /// The nearest texel.
+    Nearest,
+    /// Bilinear interpolation of the four nearest texel centres (Mitsuba's default).
+    Bilinear,
+}
+
+/// What lies outside the unit square.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Wrap {
+    /// The image again (Mitsuba's default).
+    Repeat,
+    /// The image mirrored at each edge.
+    Mirror,
+    /// The edge texels, stretched.
+    Clamp,
+}
+
+/// Why an image cannot be used as a texture.
+#[derive(Debug, thiserror::Error)]
+pub enum BitmapError {
+    /// The file could not be read or decoded.
+    #[error("{0}")]
+    Image(#[from] image::ImageError),
+    /// It has no pixels.
+    #[error("the image is empty")]
+    Empty,
+}
+
+/// An image, in linear RGB, ready for lookups.
+#[derive(Clone, Debug)]
+pub struct Bitmap {
+    width: u32,
+    height: u32,
+    /// Row by row from the top of the image.
+    texels: Vec<Rgb>,
+    filter: Filter,
+    wrap: Wrap,
+    to_uv: Affine2,
+    mean: Rgb,
+}
+
+impl Bitmap {
+    /// Loads an image file. 8- and 16-bit images (PNG, JPEG) are sRGB-encoded and decoded to
+    /// linear values unless `raw`; floating-point ones (EXR, HDR) are linear already.
+    pub fn load(
+        path: &Path,
+        raw: bool,
+        filter: Filter,
+        wrap: Wrap,
+        to_uv: Affine2,
+    ) -> Result<Bitmap, BitmapError> {
+        let image = image::ImageReader::open(path)
+            .map_err(image::ImageError::IoError)?
+            .with_guessed_format()
+            .map_err(image::ImageError::IoError)?
+            .decode()?;
+        let srgb = !raw
+            && !matches!(
+                image.color(),
+                image::ColorType::Rgb32F | image::ColorType::Rgba32F
+            );
+        let rgb = image.to_rgb32f();
+        let (width, height) = rgb.dimensions();
+        if width == 0 || height == 0 {
+            return Err(BitmapError::Empty);
+        }
+        let decode = |v: f32| if srgb { crate::color::srgb_decode(v) } else { v };
+        let texels: Vec<Rgb> = rgb
+            .pixels()
+            .map(|p| Rgb::new(decode(p[0]), decode(p[1]), decode(p[2])))
+            .collect();
+        Ok(Bitmap::from_texels(width, height, texels, filter, wrap, to_uv))
+    }
+
+    /// A bitmap from linear texels, row by row from the top.
+    pub fn from_texels(
+        width: u32,
+        height: u32,
+        texels: Vec<Rgb>,
+        filter: Filter,
+        wrap: Wrap,
+        to_uv: Affine2,
+    ) -> Bitmap {
+        assert_eq!(
+            texels.len() as u64,
+            width as u64 * height as u64,
+            "one texel per pixel"
+        );
+        let sum = texels.iter().fold(glam::DVec3::ZERO, |acc, t| {
+            acc + glam::DVec3::new(t.x as f64, t.y as f64, t.z as f64)
+        });
+        let mean = sum / texels.len() as f64;
+        Bitmap {
+            width,
+            height,
+            texels,
+            filter,
+            wrap,
+            to_uv,
+            mean: Rgb::new(mean.x as f32, mean.y as f32, mean.z as f32),
+        }
+    }
+
+    /// The mean texel (its luminance is Mitsuba's `mean()`: the mean of the texels' luminances).
+    pub fn mean(&self) -> Rgb {
+        self.mean
+    }
+
+    /// Width and height in texels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    fn texel(&self, x: i64, y: i64) -> Rgb {
+        let x = wrap(x, self.width as i64, self.wrap);
+        let y = wrap(y, self.height as i64, self.wrap);
+        self.texels[(y * self.width as i64 + x) as usize]
+    }
+
+    /// The colour at `uv`.
+    pub fn eval(&self, uv: Vec2) -> Rgb {
+        let uv = self.to_uv.transform_point2(uv);
+        let size = Vec2::new(self.width as f32, self.height as f32);
+        match self.filter {
+            Filter::Nearest => {
+                let p = (uv * size).floor();
+                self.texel(p.x as i64, p.y as i64)
+            }
+            Filter::Bilinear => {
+                let p = uv * size - 0.5;
+                let p0 = p.floor();
+                let f = p - p0;
+                let (x, y) = (p0.x as i64, p0.y as i64);
+                let top = self.texel(x, y) * (1.0 - f.x) + self.texel(x + 1, y) * f.x;
+                let bottom = self.texel(x, y + 1) * (1.0 - f.x) + self.texel(x + 1, y + 1) * f.x;
+                top * (1.0 - f.y) + bottom * f.y
+            }
+        }
+    }
+}
+
+/// A texel index wrapped into 0..n.
+fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
+    match mode {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::Clamp => i.clamp(0, n - 1),
+        Wrap::Mirror => {
+            let period = i.rem_euclid(2 * n);
+            if period < n { period } else { 2 * n - 1 - period }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_by_one(filter: Filter, wrap: Wrap) -> Bitmap {
+        Bitmap::from_texels(2, 1, vec![Rgb::ZERO, Rgb::ONE], filter, wrap, Affine2::IDENTITY)
+    }
+
+    #[test]
+    fn texel_centres_hold_their_values_and_bilinear_blends_between() {
+        let b = two_by_one(Filter::Bilinear, Wrap::Clamp);
+        assert_eq!(b.eval(Vec2::new(0.25, 0.5)), Rgb::ZERO);
+        assert_eq!(b.eval(Vec2::new(0.75, 0.5)), Rgb::ONE);
+        assert!((b.eval(Vec2::new(0.5, 0.5)).x - 0.5).abs() < 1e-6);
+        assert_eq!(b.eval(Vec2::new(0.0, 0.5)), Rgb::ZERO, "clamped at the edge");
+        let r = two_by_one(Filter::Bilinear, Wrap::Repeat);
+        assert!(
+            (r.eval(Vec2::new(0.0, 0.5)).x - 0.5).abs() < 1e-6,
+            "wraps to the far texel"
+        );
+        let n = two_by_one(Filter::Nearest, Wrap::Repeat);
+        assert_eq!(n.eval(Vec2::new(0.49, 0.0)), Rgb::ZERO);
+        assert_eq!(n.eval(Vec2::new(1.51, 0.0)), Rgb::ONE);
+        assert!((b.mean().x - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn wrap_modes() {
+        assert_eq!(
+            (-1..5).map(|i| wrap(i, 2, Wrap::Repeat)).collect::<Vec<_>>(),
+            [1, 0, 1, 0, 1, 0]
+        );
+        assert_eq!(
+            (-1..5).map(|i| wrap(i, 2, Wrap::Mirror)).collect::<Vec<_>>(),
+            [0, 0, 1, 1, 0, 0]
+        );
+        assert_eq!(
+            (-1..5).map(|i| wrap(i, 2, Wrap::Clamp)).collect::<Vec<_>>(),
+            [0, 0, 1, 1, 1, 1]
+        );
+    }
+}

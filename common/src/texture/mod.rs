@@ -1,0 +1,125 @@
+//! Textures: colours and numbers that vary over a surface, looked up by its (u, v) coordinates.
+//!
+//! A material parameter is a [`Param`]: a fixed value, which costs a scene nothing beyond a
+//! branch, or a texture. Textures are evaluated where a BSDF needs the value, as Mitsuba does,
+//! so that every BSDF sees the same parameters whichever integrator calls it.
+
+mod bitmap;
+
+use std::sync::Arc;
+
+use glam::{Affine2, Vec2};
+
+pub use bitmap::{Bitmap, BitmapError, Filter, Wrap};
+
+use crate::color::Rgb;
+
+/// A texture.
+#[derive(Clone, Debug)]
+pub enum Texture {
+    /// An image (Mitsuba's `bitmap`).
+    Bitmap(Bitmap),
+    /// Two colours in a 2 × 2 checkerboard over the unit square (Mitsuba's `checkerboard`).
+    Checkerboard {
+        /// The colour where ⌊2u⌋ + ⌊2v⌋ is even.
+        color0: Rgb,
+        /// The other colour.
+        color1: Rgb,
+        /// Applied to (u, v) first.
+        to_uv: Affine2,
+    },
+}
+
+impl Texture {
+    /// The colour at `uv`.
+    pub fn eval(&self, uv: Vec2) -> Rgb {
+        match self {
+            Texture::Bitmap(b) => b.eval(uv),
+            Texture::Checkerboard {
+                color0,
+                color1,
+                to_uv,
+            } => {
+                let p = to_uv.transform_point2(uv);
+                let a = p.x - p.x.floor() > 0.5;
+                let b = p.y - p.y.floor() > 0.5;
+                if a == b { *color0 } else { *color1 }
+            }
+        }
+    }
+
+    /// The value at `uv` of a texture used as a number (roughness, a blend weight, opacity), as
+    /// Mitsuba's `eval_1` gives it: a bitmap's luminance; for a checkerboard the mean of the
+    /// colour's channels, with the two colours swapped (Mitsuba 3 swaps them in `eval_1`, and
+    /// scenes such as its textured carbon fibre are rendered that way).
+    pub fn eval_float(&self, uv: Vec2) -> f32 {
+        match self {
+            Texture::Bitmap(b) => luminance(b.eval(uv)),
+            Texture::Checkerboard { color0, color1, .. } => {
+                let first = self.eval(uv) == *color0;
+                crate::color::mean(if first { *color1 } else { *color0 })
+            }
+        }
+    }
+
+    /// The mean as Mitsuba's `mean()` gives it (BSDFs choose lobe probabilities from it): a
+    /// bitmap's mean luminance, a checkerboard's mean of its colours' channel means.
+    pub fn mean(&self) -> f32 {
+        match self {
+            Texture::Bitmap(b) => luminance(b.mean()),
+            Texture::Checkerboard { color0, color1, .. } => {
+                0.5 * (crate::color::mean(*color0) + crate::color::mean(*color1))
+            }
+        }
+    }
+}
+
+/// A material parameter: fixed, or read from a texture at the surface's (u, v).
+#[derive(Clone, Debug)]
+pub enum Param<T> {
+    /// The same everywhere.
+    Fixed(T),
+    /// From a texture.
+    Textured(Arc<Texture>),
+}
+
+impl<T> From<T> for Param<T> {
+    fn from(v: T) -> Self {
+        Param::Fixed(v)
+    }
+}
+
+impl Param<Rgb> {
+    /// The colour at `uv`.
+    #[inline]
+    pub fn at(&self, uv: Vec2) -> Rgb {
+        match self {
+            Param::Fixed(v) => *v,
+            Param::Textured(t) => t.eval(uv),
+        }
+    }
+
+    /// Mitsuba's `mean()`: the mean of a fixed colour's channels, or the texture's mean.
+    pub fn mean(&self) -> f32 {
+        match self {
+            Param::Fixed(v) => crate::color::mean(*v),
+            Param::Textured(t) => t.mean(),
+        }
+    }
+}
+
+impl Param<f32> {
+    /// The number at `uv`.
+    #[inline]
+    pub fn at(&self, uv: Vec2) -> f32 {
+        match self {
+            Param::Fixed(v) => *v,
+            Param::Textured(t) => t.eval_float(uv),
+        }
+    }
+}
+
+/// Mitsuba's luminance of a linear sRGB colour.
+pub fn luminance(c: Rgb) -> f32 {
+    c.x * 0.212_671 + c.y * 0.715_160 + c.z * 0.072_169
+}
