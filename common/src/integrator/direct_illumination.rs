@@ -45,7 +45,7 @@ impl DirectSettings {
 /// once at the first surface. Media are not modelled, as in Mitsuba's `direct`.
 pub fn radiance(scene: &Scene, settings: &DirectSettings, ray: Ray, sampler: &mut Sampler) -> Rgb {
     let Some((_, sp)) = scene.intersect(&ray) else {
-        return Rgb::ZERO;
+        return scene.environment_at(ray.d).map_or(Rgb::ZERO, |(le, _)| le);
     };
     let hit = Hit::new(scene, sp, -ray.d);
     let mut l = Rgb::ZERO;
@@ -67,12 +67,6 @@ pub fn radiance(scene: &Scene, settings: &DirectSettings, ray: Ray, sampler: &mu
             continue;
         };
         let wi = hit.frame.to_world(bs.wo);
-        let Some((_, found)) = scene.intersect(&Scene::spawn_ray(&hit.sp, wi)) else {
-            continue;
-        };
-        let Some(li) = scene.shapes[found.shape as usize].light else {
-            continue;
-        };
         // The previous bounce's density, scaled so that the power heuristic compares it with
         // the light samples' in proportion to the sample counts.
         let prev = PreviousBounce {
@@ -84,7 +78,18 @@ pub fn radiance(scene: &Scene, settings: &DirectSettings, ray: Ray, sampler: &mu
             },
             delta: bs.delta || ne == 0 || !hit.bsdf.has_smooth(),
         };
-        l += bs.weight * light::emitted(scene, li, &found, -wi, Some(&prev)) / nb as f32;
+        let emitted = match scene.intersect(&Scene::spawn_ray(&hit.sp, wi)) {
+            Some((_, found)) => match scene.shapes[found.shape as usize].light {
+                Some(li) => light::emitted(scene, li, &found, -wi, Some(&prev)),
+                None => continue,
+            },
+            None => {
+                let mut walk = Walk::new(Scene::spawn_ray(&hit.sp, wi), Rgb::ONE, None);
+                walk.prev = Some(prev);
+                walk.escaped(scene)
+            }
+        };
+        l += bs.weight * emitted / nb as f32;
     }
     l
 }

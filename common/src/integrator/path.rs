@@ -39,8 +39,11 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, ray: Ray, sampler: &mut 
     let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
     loop {
         match walk.next_event(scene, sampler) {
-            // There are no environment lights: a path that leaves the scene ends.
-            Event::Gone => break,
+            // A path that leaves the scene finds the environment, if there is one, and ends.
+            Event::Gone => {
+                l += walk.escaped(scene);
+                break;
+            }
             // Scattering in a medium: light sampling, then the phase function.
             Event::Medium { p, medium, weight } => {
                 walk.beta *= weight * scene.media[medium as usize].albedo;

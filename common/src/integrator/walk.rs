@@ -147,6 +147,19 @@ impl Walk {
         }
     }
 
+    /// What a walk that left the scene finds there (an environment light), times the
+    /// throughput, weighted against light sampling as [`Walk::emission`] is.
+    pub fn escaped(&self, scene: &Scene) -> Rgb {
+        let Some((le, light_pdf)) = scene.environment_at(self.ray.d) else {
+            return Rgb::ZERO;
+        };
+        let w = match &self.prev {
+            Some(p) if !p.delta => super::mis_weight(p.pdf, light_pdf),
+            _ => 1.0,
+        };
+        self.beta * le * w
+    }
+
     /// Samples the BSDF at `hit` for the next direction (three random numbers).
     pub fn sample_bsdf(hit: &Hit, sampler: &mut Sampler, mode: TransportMode) -> Option<BsdfSample> {
         let u1 = sampler.next_1d();

@@ -5,11 +5,15 @@
 
 mod area;
 mod beam;
+mod distant;
+mod envmap;
 mod point;
 mod spot;
 
 pub use area::AreaLight;
 pub use beam::BeamLight;
+pub use distant::{ConstantLight, DirectionalLight, SceneSphere};
+pub use envmap::EnvmapLight;
 pub use point::PointLight;
 pub use spot::SpotLight;
 
@@ -64,6 +68,12 @@ pub enum Light {
     Spot(SpotLight),
     /// Collimated beam from a disc.
     Beam(BeamLight),
+    /// The same radiance from every direction, at infinity.
+    Constant(ConstantLight),
+    /// Radiance from an image around the scene, at infinity.
+    Envmap(Box<EnvmapLight>),
+    /// Parallel light from one direction (the sun).
+    Directional(DirectionalLight),
 }
 
 impl Light {
@@ -79,6 +89,9 @@ impl Light {
             Light::Point(l) => l.sample_li(p),
             Light::Spot(l) => l.sample_li(p),
             Light::Beam(l) => l.sample_li(p),
+            Light::Constant(l) => l.sample_li(p, u),
+            Light::Envmap(l) => l.sample_li(p, u),
+            Light::Directional(l) => l.sample_li(p),
         }
     }
 
@@ -94,6 +107,9 @@ impl Light {
             Light::Point(l) => l.sample_emission(u_dir),
             Light::Spot(l) => l.sample_emission(u_dir),
             Light::Beam(l) => l.sample_emission(u_pos),
+            Light::Constant(l) => l.sample_emission(u_pos, u_dir),
+            Light::Envmap(l) => l.sample_emission(u_pos, u_dir),
+            Light::Directional(l) => l.sample_emission(u_pos),
         }
     }
 
@@ -104,6 +120,44 @@ impl Light {
             Light::Point(l) => l.power(),
             Light::Spot(l) => l.power(),
             Light::Beam(l) => l.power(),
+            Light::Constant(l) => l.power(),
+            Light::Envmap(l) => l.power(),
+            Light::Directional(l) => l.power(),
+        }
+    }
+
+    /// Radiance that a ray leaving the scene along `d` finds, from a light around the scene
+    /// (zero for the others, and for the directional light, which no ray can hit).
+    pub fn environment_radiance(&self, d: Vec3A) -> Rgb {
+        match self {
+            Light::Constant(l) => l.radiance,
+            Light::Envmap(l) => l.eval(d),
+            _ => Rgb::ZERO,
+        }
+    }
+
+    /// Density per unit solid angle with which [`Light::sample_li`] picks direction `d` of a
+    /// light around the scene.
+    pub fn environment_pdf(&self, d: Vec3A) -> f32 {
+        match self {
+            Light::Constant(_) => 1.0 / (4.0 * std::f32::consts::PI),
+            Light::Envmap(l) => l.pdf(d),
+            _ => 0.0,
+        }
+    }
+
+    /// Whether rays leaving the scene see this light.
+    pub fn is_environment(&self) -> bool {
+        matches!(self, Light::Constant(_) | Light::Envmap(_))
+    }
+
+    /// Tells a light at infinity the scene's bounding sphere, once the scene is built.
+    pub fn fit_scene(&mut self, sphere: SceneSphere) {
+        match self {
+            Light::Constant(l) => l.sphere = sphere,
+            Light::Envmap(l) => l.sphere = sphere,
+            Light::Directional(l) => l.sphere = sphere,
+            _ => {}
         }
     }
 }

@@ -17,7 +17,10 @@ use crate::color::Rgb;
 use crate::filter::Filter;
 use crate::geometry::Frame;
 use crate::geometry::{Bvh, Primitive, Sphere, Triangle};
-use crate::light::{AreaLight, BeamLight, Light, PointLight, SpotLight};
+use crate::light::{
+    AreaLight, BeamLight, ConstantLight, DirectionalLight, EnvmapLight, Light, PointLight, SceneSphere,
+    SpotLight,
+};
 use crate::medium::{Medium, Phase};
 use crate::sampling::Distribution1D;
 use crate::texture::{Bitmap, Filter as TexFilter, Param, Texture, Wrap};
@@ -242,6 +245,20 @@ impl<'a> Builder<'a> {
             .iter()
             .filter(|s| self.bsdfs[s.bsdf as usize].is_null())
             .count();
+        // Lights at infinity are sized to the scene; Mitsuba allows one environment.
+        let bounds = bvh.bounds();
+        let sphere = SceneSphere::around(bounds.min, bounds.max);
+        for light in &mut self.lights {
+            light.fit_scene(sphere);
+        }
+        let mut environments = self.lights.iter().enumerate().filter(|(_, l)| l.is_environment());
+        let environment = environments.next().map(|(i, _)| i as u32);
+        if environments.next().is_some() {
+            return Err(ctx.err(
+                root,
+                "only one environment emitter (constant or envmap) is allowed",
+            ));
+        }
         let powers: Vec<f32> = self.lights.iter().map(Light::power).collect();
         let light_selection = Distribution1D::new(&powers);
         let emitting: Vec<f32> = powers.iter().map(|&p| if p > 0.0 { 1.0 } else { 0.0 }).collect();
@@ -261,6 +278,7 @@ impl<'a> Builder<'a> {
             camera_medium: self.camera_medium,
             light_selection,
             light_sampling,
+            environment,
             camera,
             filter,
             spp,
@@ -1230,6 +1248,62 @@ impl<'a> Builder<'a> {
                     irradiance,
                 })
             }
+            "constant" => Light::Constant(ConstantLight {
+                radiance: p.emission("radiance", Rgb::ONE)?,
+                sphere: SceneSphere::default(),
+            }),
+            "envmap" => {
+                let name = p
+                    .string("filename")?
+                    .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
+                let path = p.resolve_file("filename", name)?;
+                let scale = p.float_or("scale", 1.0)?;
+                if !(scale >= 0.0 && scale.is_finite()) {
+                    return Err(p.err_at(
+                        "scale",
+                        format!("scale must be a non-negative number, not {scale}"),
+                    ));
+                }
+                // Changes how the map is sampled, not what it renders to.
+                let _ = p.boolean("mis_compensation")?;
+                let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+                // Mitsuba decodes 8-bit images from sRGB and ignores alpha, as for textures.
+                let bitmap = Bitmap::load(
+                    &path,
+                    false,
+                    TexFilter::Bilinear,
+                    Wrap::Repeat,
+                    glam::Affine2::IDENTITY,
+                )
+                .map_err(|e| p.err_at("filename", format!("{}: {e}", path.display())))?;
+                let (w, h) = bitmap.size();
+                Light::Envmap(Box::new(EnvmapLight::new(
+                    w as usize,
+                    h as usize,
+                    bitmap.texels().to_vec(),
+                    scale,
+                    Mat3A::from_mat4(m),
+                )))
+            }
+            "directional" => {
+                let direction = match (p.point("direction")?, p.transform("to_world")?) {
+                    (Some(_), Some(_)) => {
+                        return Err(self.ctx.err(el, "give direction or to_world, not both"));
+                    }
+                    (Some(d), None) => d,
+                    (None, m) => m.unwrap_or(Mat4::IDENTITY).transform_vector3a(Vec3A::Z),
+                };
+                let Some(direction) = direction.try_normalize() else {
+                    return Err(self
+                        .ctx
+                        .err(el, "a directional emitter needs a non-zero direction"));
+                };
+                Light::Directional(DirectionalLight {
+                    direction,
+                    irradiance: p.emission("irradiance", Rgb::ONE)?,
+                    sphere: SceneSphere::default(),
+                })
+            }
             "area" => {
                 return Err(self
                     .ctx
@@ -1238,7 +1312,9 @@ impl<'a> Builder<'a> {
             other => {
                 return Err(self.ctx.err(
                     el,
-                    format!("emitter type \"{other}\" is not supported (point, spot, area, beam)"),
+                    format!(
+                        "emitter type \"{other}\" is not supported (point, spot, area, beam, constant, envmap, directional)"
+                    ),
                 ));
             }
         };

@@ -164,14 +164,14 @@ pub(crate) fn disk() -> Mesh {
     let r = (PI / polygon_area).sqrt();
     let mut mesh = Mesh::default();
     let mut uvs = Vec::new();
+    let rim = |i: u32| {
+        let phi = 2.0 * PI * (i % SEGMENTS) as f32 / SEGMENTS as f32;
+        Vec3A::new(r * phi.cos(), r * phi.sin(), 0.0)
+    };
     for i in 0..SEGMENTS {
         let (t0, t1) = (i as f32 / SEGMENTS as f32, (i + 1) as f32 / SEGMENTS as f32);
-        let rim = |t: f32| {
-            let phi = 2.0 * PI * t;
-            Vec3A::new(r * phi.cos(), r * phi.sin(), 0.0)
-        };
         let base = mesh.positions.len() as u32;
-        mesh.positions.extend([Vec3A::ZERO, rim(t0), rim(t1)]);
+        mesh.positions.extend([Vec3A::ZERO, rim(i), rim(i + 1)]);
         uvs.extend([
             Vec2::new(0.0, 0.5 * (t0 + t1)),
             Vec2::new(1.0, t0),

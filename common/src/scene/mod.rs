@@ -111,6 +111,8 @@ pub struct Scene {
     pub files: Vec<PathBuf>,
     /// How many shapes have a null BSDF (shadow rays must look past them).
     pub null_shapes: usize,
+    /// The light that rays leaving the scene see (`constant` or `envmap`), if any.
+    pub environment: Option<u32>,
 }
 
 impl Scene {
@@ -243,6 +245,15 @@ impl Scene {
         let mut ls = self.lights[i].sample_li(p, self.bvh.primitives(), u)?;
         ls.pdf *= pmf;
         Some((i as u32, ls))
+    }
+
+    /// Radiance that a ray leaving the scene along `d` finds, and the density with which
+    /// [`Scene::sample_light`] would have chosen that direction.
+    pub fn environment_at(&self, d: Vec3A) -> Option<(crate::color::Rgb, f32)> {
+        let i = self.environment?;
+        let light = &self.lights[i as usize];
+        let le = light.environment_radiance(d);
+        Some((le, self.light_sampling.pmf(i as usize) * light.environment_pdf(d)))
     }
 
     /// Density of [`Scene::sample_light`] returning point `sp` on area light `light`, from `p`.

@@ -118,6 +118,11 @@ impl Bitmap {
         self.mean
     }
 
+    /// The linear texels, row by row from the top.
+    pub fn texels(&self) -> &[Rgb] {
+        &self.texels
+    }
+
     /// Width and height in texels.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)

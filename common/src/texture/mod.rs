@@ -12,7 +12,7 @@ use glam::{Affine2, Vec2};
 
 pub use bitmap::{Bitmap, BitmapError, Filter, Wrap};
 
-use crate::color::Rgb;
+use crate::color::{Rgb, luminance};
 
 /// A texture.
 #[derive(Clone, Debug)]
@@ -117,9 +117,4 @@ impl Param<f32> {
             Param::Textured(t) => t.eval_float(uv),
         }
     }
-}
-
-/// Mitsuba's luminance of a linear sRGB colour.
-pub fn luminance(c: Rgb) -> f32 {
-    c.x * 0.212_671 + c.y * 0.715_160 + c.z * 0.072_169
 }

@@ -48,7 +48,10 @@ pub fn camera_path(ctx: &GatherContext, ray: Ray, sampler: &mut Sampler) -> Rgb 
     let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
     while walk.depth < ctx.max_depth {
         match walk.next_event(scene, sampler) {
-            Event::Gone => break,
+            Event::Gone => {
+                l += walk.escaped(scene);
+                break;
+            }
             // In a medium, the first collision is a gather point: direct light plus volume
             // photons.
             Event::Medium { p, medium, weight } => {
