@@ -37,3 +37,10 @@ fn lights_and_thin_lens_match_mitsuba() {
 fn meshes_and_transforms_match_mitsuba() {
     check("meshes");
 }
+
+/// `rough-glass.xml`: rough dielectric spheres (GGX and Beckmann) and a cube with a
+/// checkerboard roughness, a thin glass pane, and a mask whose opacity is a checkerboard.
+#[test]
+fn rough_glass_thin_glass_and_mask_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("rough-glass");
+}

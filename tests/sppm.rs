@@ -144,3 +144,10 @@ fn bad_parameters_are_refused() {
 fn textures_sppm_converges_to_mitsuba() {
     check_convergence("textures.xml", "textures.exr");
 }
+
+/// Rough glass, a thin pane and a mask: the camera pass follows rough glass by BSDF sampling
+/// (as rough metal), photons cross all three.
+#[test]
+fn rough_glass_sppm_converges_to_mitsuba() {
+    check_convergence("rough-glass.xml", "rough-glass.exr");
+}

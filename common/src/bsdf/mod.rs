@@ -8,12 +8,16 @@ mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 mod plastic;
+mod rough_dielectric;
+mod thin_dielectric;
 
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use microfacet::{Distribution, Microfacet, Roughness};
 pub use plastic::Plastic;
+pub use rough_dielectric::RoughDielectric;
+pub use thin_dielectric::ThinDielectric;
 
 use glam::{Vec2, Vec3A};
 
@@ -54,6 +58,13 @@ pub enum Bsdf {
     Conductor(Conductor),
     /// Smooth glass.
     Dielectric(Dielectric),
+    /// Rough glass.
+    RoughDielectric(Box<RoughDielectric>),
+    /// A thin pane of glass.
+    ThinDielectric(ThinDielectric),
+    /// A material with holes: opaque where the opacity is, crossed unchanged elsewhere
+    /// (Mitsuba's `mask`).
+    Mask(Box<(Bsdf, Param<f32>)>),
     /// Smooth or rough coated diffuse.
     Plastic(Box<Plastic>),
     /// Linear blend of two materials: (1 - weight) · first + weight · second.
@@ -73,7 +84,29 @@ impl Bsdf {
             Bsdf::Diffuse(b) => b.sample(uv, wi, u2),
             Bsdf::Conductor(b) => b.sample(uv, wi, u2),
             Bsdf::Dielectric(b) => b.sample(uv, wi, u1, mode),
+            Bsdf::RoughDielectric(b) => b.sample(uv, wi, u1, u2, mode),
+            Bsdf::ThinDielectric(b) => b.sample(uv, wi, u1),
             Bsdf::Plastic(b) => b.sample(uv, wi, u1, u2),
+            Bsdf::Mask(m) => {
+                let opacity = m.1.at(uv).clamp(0.0, 1.0);
+                if u1 < opacity {
+                    let s =
+                        m.0.sample(uv, wi, (u1 / opacity).min(1.0 - f32::EPSILON), u2, mode)?;
+                    // The choice's probability cancels against the opacity in the weight.
+                    Some(BsdfSample {
+                        pdf: s.pdf * opacity,
+                        ..s
+                    })
+                } else {
+                    Some(BsdfSample {
+                        wo: -wi,
+                        weight: Rgb::ONE,
+                        pdf: 1.0 - opacity,
+                        delta: true,
+                        eta: 1.0,
+                    })
+                }
+            }
             Bsdf::Null => Some(BsdfSample {
                 wo: -wi,
                 weight: Rgb::ONE,
@@ -119,8 +152,10 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),
-            Bsdf::Dielectric(_) | Bsdf::Null => Rgb::ZERO,
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => Rgb::ZERO,
+            Bsdf::RoughDielectric(b) => b.eval(uv, wi, wo),
             Bsdf::Plastic(b) => b.eval(uv, wi, wo),
+            Bsdf::Mask(m) => m.0.eval(uv, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
                 (1.0 - w) * pair.0.eval(uv, wi, wo) + w * pair.1.eval(uv, wi, wo)
@@ -141,8 +176,10 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
             Bsdf::Conductor(b) => b.pdf(uv, wi, wo),
-            Bsdf::Dielectric(_) | Bsdf::Null => 0.0,
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => 0.0,
+            Bsdf::RoughDielectric(b) => b.pdf(uv, wi, wo),
             Bsdf::Plastic(b) => b.pdf(wi, wo),
+            Bsdf::Mask(m) => m.0.pdf(uv, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
                 (1.0 - w) * pair.0.pdf(uv, wi, wo) + w * pair.1.pdf(uv, wi, wo)
@@ -164,10 +201,16 @@ impl Bsdf {
     pub fn gathers_photons(&self) -> bool {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
-            Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::Null => false,
+            // Rough glass is followed like rough metal: its lobes are too sharp to gather on.
+            Bsdf::Conductor(_)
+            | Bsdf::Dielectric(_)
+            | Bsdf::RoughDielectric(_)
+            | Bsdf::ThinDielectric(_)
+            | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
                 pair.0.gathers_photons() || pair.1.gathers_photons()
             }
+            Bsdf::Mask(m) => m.0.gathers_photons(),
         }
     }
 
@@ -176,8 +219,10 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
             Bsdf::Conductor(c) => c.roughness.is_some(),
-            Bsdf::Dielectric(_) | Bsdf::Null => false,
+            Bsdf::RoughDielectric(_) => true,
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_smooth() || pair.1.has_smooth(),
+            Bsdf::Mask(m) => m.0.has_smooth(),
         }
     }
 

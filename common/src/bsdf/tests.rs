@@ -69,6 +69,18 @@ fn diffuse(r: f32) -> Bsdf {
     })
 }
 
+fn rough_glass(distribution: Distribution, alpha: f32) -> Bsdf {
+    Bsdf::RoughDielectric(Box::new(RoughDielectric {
+        eta: 1.5,
+        roughness: Roughness {
+            distribution,
+            alpha: alpha.into(),
+        },
+        specular_reflectance: Rgb::ONE.into(),
+        specular_transmittance: Rgb::ONE.into(),
+    }))
+}
+
 fn glass() -> Bsdf {
     Bsdf::Dielectric(Dielectric {
         eta: 1.5,
@@ -113,6 +125,15 @@ fn cases() -> Vec<(&'static str, Bsdf)> {
                     to_uv: glam::Affine2::IDENTITY,
                 })),
             ),
+        ),
+        ("rough glass ggx 0.2", rough_glass(Distribution::Ggx, 0.2)),
+        (
+            "rough glass beckmann 0.5",
+            rough_glass(Distribution::Beckmann, 0.5),
+        ),
+        (
+            "mask over rough plastic",
+            Bsdf::Mask(Box::new((plastic(Some(0.3), 0.6), 0.7.into()))),
         ),
         (
             "twosided diffuse/plastic",
@@ -267,6 +288,18 @@ fn white_furnace_never_creates_energy() {
     all.push(("smooth gold", conductor(None)));
     all.push(("glass", glass()));
     all.push((
+        "thin glass",
+        Bsdf::ThinDielectric(ThinDielectric {
+            eta: 1.5,
+            specular_reflectance: Rgb::ONE.into(),
+            specular_transmittance: Rgb::ONE.into(),
+        }),
+    ));
+    all.push((
+        "mask over mirror",
+        Bsdf::Mask(Box::new((conductor(None), 0.4.into()))),
+    ));
+    all.push((
         "mirror",
         Bsdf::Conductor(Conductor {
             eta: Rgb::ZERO,
@@ -289,7 +322,8 @@ fn white_furnace_never_creates_energy() {
             }
             let albedo = sum / n as f32;
             assert!(albedo.max_element() <= 1.01, "{name}, wi {wi}: albedo {albedo}");
-            let lossless = matches!(name, "white diffuse" | "mirror") && wi.z > 0.0 || name == "glass";
+            let lossless = matches!(name, "white diffuse" | "mirror") && wi.z > 0.0
+                || matches!(name, "glass" | "thin glass");
             if lossless {
                 assert!(
                     (albedo - Rgb::ONE).abs().max_element() < 0.01,

@@ -11,7 +11,10 @@ use super::named;
 use super::props::{Ctx, FileRoot, Props, Res};
 use super::xml::{self, Element};
 use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
-use crate::bsdf::{Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, Roughness};
+use crate::bsdf::{
+    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, RoughDielectric, Roughness,
+    ThinDielectric,
+};
 use crate::camera::Camera;
 use crate::color::Rgb;
 use crate::filter::Filter;
@@ -777,6 +780,27 @@ impl<'a> Builder<'a> {
                 specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
                 specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
             }),
+            "roughdielectric" => Bsdf::RoughDielectric(Box::new(RoughDielectric {
+                eta: self.relative_ior(&p, "bk7")?,
+                roughness: self.roughness(&p)?,
+                specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
+            })),
+            "thindielectric" => Bsdf::ThinDielectric(ThinDielectric {
+                eta: self.relative_ior(&p, "bk7")?,
+                specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
+            }),
+            "mask" => {
+                let opacity = self.float_param(&p, "opacity", 0.5)?;
+                let mut nested = self.nested_bsdfs(&p)?;
+                if nested.len() != 1 {
+                    return Err(self
+                        .ctx
+                        .err(el, format!("mask needs one nested bsdf, not {}", nested.len())));
+                }
+                Bsdf::Mask(Box::new((nested.remove(0), opacity)))
+            }
             kind @ ("plastic" | "roughplastic") => {
                 let roughness = if kind == "roughplastic" {
                     Some(self.microfacet(&p)?)
@@ -832,7 +856,8 @@ impl<'a> Builder<'a> {
                     el,
                     format!(
                         "bsdf type \"{other}\" is not supported (diffuse, conductor, roughconductor, \
-                         dielectric, plastic, roughplastic, twosided, blendbsdf)"
+                         dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided, \
+                         blendbsdf, mask, null)"
                     ),
                 ));
             }
