@@ -96,6 +96,8 @@ struct Builder<'a> {
     files: Vec<std::path::PathBuf>,
     /// The sensor's far clipping distance, checked against the scene's extent.
     far_clip: f32,
+    /// Top-level samplers (a sensor may refer to one), by id: their sample counts.
+    sampler_ids: HashMap<String, u32>,
     /// Top-level textures, by id.
     texture_ids: HashMap<String, Arc<Texture>>,
     /// Ids of top-level area emitters (shapes refer to them).
@@ -122,6 +124,7 @@ impl<'a> Builder<'a> {
             files: Vec::new(),
             far_clip: f32::INFINITY,
             texture_ids: HashMap::new(),
+            sampler_ids: HashMap::new(),
             area_ids: Default::default(),
             area_taken: Default::default(),
         }
@@ -141,6 +144,13 @@ impl<'a> Builder<'a> {
             if self.medium_ids.insert(id.to_string(), index).is_some() || self.bsdf_ids.contains_key(id) {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
+        }
+        for el in root.children.iter().filter(|e| e.tag == "sampler") {
+            let Some(id) = el.attr("id") else {
+                return Err(ctx.err(el, "a top-level <sampler> needs an id to be referred to"));
+            };
+            let spp = self.sampler(el)?;
+            self.sampler_ids.insert(id.to_string(), spp);
         }
         for el in root.children.iter().filter(|e| e.tag == "texture") {
             let Some(id) = el.attr("id") else {
@@ -180,7 +190,7 @@ impl<'a> Builder<'a> {
         self.area_ids = area_ids.keys().cloned().collect();
         for el in &root.children {
             match el.tag.as_str() {
-                "bsdf" | "medium" | "texture" => {}
+                "bsdf" | "medium" | "texture" | "sampler" => {}
                 "shape" => self.shape(el, &area_ids)?,
                 "emitter" if el.attr("type") == Some("area") && el.attr("id").is_some() => {}
                 "emitter" => self.emitter(el)?,
@@ -502,9 +512,14 @@ impl<'a> Builder<'a> {
             .object("film")?
             .ok_or_else(|| self.ctx.err(el, "the sensor has no <film>"))?;
         let (width, height, filter) = self.film(film)?;
-        let spp = match p.object("sampler")? {
-            Some(s) => self.sampler(s)?,
-            None => 4,
+        let referred = p
+            .objects("ref")
+            .into_iter()
+            .find_map(|r| self.sampler_ids.get(r.attr("id")?).copied());
+        let spp = match (p.object("sampler")?, referred) {
+            (Some(s), _) => self.sampler(s)?,
+            (None, Some(spp)) => spp,
+            (None, None) => 4,
         };
         p.finish()?;
 
