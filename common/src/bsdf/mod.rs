@@ -8,12 +8,14 @@ mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 mod plastic;
+mod principled;
 
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
-pub use microfacet::{Distribution, Microfacet, Roughness};
+pub use microfacet::{AnisotropicGgx, Distribution, Microfacet, Roughness};
 pub use plastic::Plastic;
+pub use principled::{Principled, eta_from_specular};
 
 use glam::{Vec2, Vec3A};
 
@@ -56,6 +58,8 @@ pub enum Bsdf {
     Dielectric(Dielectric),
     /// Smooth or rough coated diffuse.
     Plastic(Box<Plastic>),
+    /// Mitsuba's `principled` (Burley's Disney BSDF).
+    Principled(Box<Principled>),
     /// Linear blend of two materials: (1 - weight) · first + weight · second.
     Blend(Box<(Bsdf, Bsdf)>, Param<f32>),
     /// Front material and back material (Mitsuba's `twosided`).
@@ -74,6 +78,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.sample(uv, wi, u2),
             Bsdf::Dielectric(b) => b.sample(uv, wi, u1, mode),
             Bsdf::Plastic(b) => b.sample(uv, wi, u1, u2),
+            Bsdf::Principled(b) => b.sample(uv, wi, u1, u2, mode),
             Bsdf::Null => Some(BsdfSample {
                 wo: -wi,
                 weight: Rgb::ONE,
@@ -97,7 +102,7 @@ impl Bsdf {
                 // A smooth direction could have come from either lobe: use the mixture density.
                 let pdf = self.pdf(uv, wi, s.wo);
                 (pdf > 0.0).then(|| BsdfSample {
-                    weight: self.eval(uv, wi, s.wo) / pdf,
+                    weight: self.eval_mode(uv, wi, s.wo, mode) / pdf,
                     pdf,
                     ..s
                 })
@@ -114,23 +119,32 @@ impl Bsdf {
         }
     }
 
-    /// f(wi, wo) · |cos θo| of the non-delta lobes at `uv`.
+    /// f(wi, wo) · |cos θo| of the non-delta lobes at `uv`, for radiance (camera paths, light
+    /// sampling and photon gathering): where refraction treats the two transport modes
+    /// differently (the principled's transmission), [`Bsdf::sample`] applies the mode it is
+    /// given.
     pub fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+        self.eval_mode(uv, wi, wo, TransportMode::Radiance)
+    }
+
+    /// [`Bsdf::eval`] for either transport mode.
+    fn eval_mode(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::Null => Rgb::ZERO,
             Bsdf::Plastic(b) => b.eval(uv, wi, wo),
+            Bsdf::Principled(b) => b.eval(uv, wi, wo, mode),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
-                (1.0 - w) * pair.0.eval(uv, wi, wo) + w * pair.1.eval(uv, wi, wo)
+                (1.0 - w) * pair.0.eval_mode(uv, wi, wo, mode) + w * pair.1.eval_mode(uv, wi, wo, mode)
             }
             Bsdf::TwoSided(pair) => {
                 let flip = Vec3A::new(1.0, 1.0, -1.0);
                 if wi.z >= 0.0 {
-                    pair.0.eval(uv, wi, wo)
+                    pair.0.eval_mode(uv, wi, wo, mode)
                 } else {
-                    pair.1.eval(uv, wi * flip, wo * flip)
+                    pair.1.eval_mode(uv, wi * flip, wo * flip, mode)
                 }
             }
         }
@@ -143,6 +157,7 @@ impl Bsdf {
             Bsdf::Conductor(b) => b.pdf(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::Null => 0.0,
             Bsdf::Plastic(b) => b.pdf(wi, wo),
+            Bsdf::Principled(b) => b.pdf(uv, wi, wo),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
                 (1.0 - w) * pair.0.pdf(uv, wi, wo) + w * pair.1.pdf(uv, wi, wo)
@@ -164,6 +179,7 @@ impl Bsdf {
     pub fn gathers_photons(&self) -> bool {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Principled(b) => b.gathers_photons(),
             Bsdf::Conductor(_) | Bsdf::Dielectric(_) | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
                 pair.0.gathers_photons() || pair.1.gathers_photons()
@@ -171,10 +187,21 @@ impl Bsdf {
         }
     }
 
+    /// Whether the material depends on the orientation of the shading frame about the normal
+    /// (anisotropic roughness): only then is the frame's first tangent aligned with the
+    /// surface's ∂p/∂u, as Mitsuba aligns it.
+    pub fn is_anisotropic(&self) -> bool {
+        match self {
+            Bsdf::Principled(b) => b.is_anisotropic(),
+            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.is_anisotropic() || pair.1.is_anisotropic(),
+            _ => false,
+        }
+    }
+
     /// Whether any lobe is not a delta: only then do light sampling and photon gathering see it.
     pub fn has_smooth(&self) -> bool {
         match self {
-            Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Diffuse(_) | Bsdf::Plastic(_) | Bsdf::Principled(_) => true,
             Bsdf::Conductor(c) => c.roughness.is_some(),
             Bsdf::Dielectric(_) | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_smooth() || pair.1.has_smooth(),
