@@ -10,14 +10,16 @@ pub mod microfacet;
 mod plastic;
 mod rough_dielectric;
 mod thin_dielectric;
+mod principled;
 
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
-pub use microfacet::{Distribution, Microfacet, Roughness};
+pub use microfacet::{AnisotropicGgx, Distribution, Microfacet, Roughness};
 pub use plastic::Plastic;
 pub use rough_dielectric::RoughDielectric;
 pub use thin_dielectric::ThinDielectric;
+pub use principled::{Principled, eta_from_specular};
 
 use glam::{Vec2, Vec3A};
 
@@ -67,6 +69,8 @@ pub enum Bsdf {
     Mask(Box<(Bsdf, Param<f32>)>),
     /// Smooth or rough coated diffuse.
     Plastic(Box<Plastic>),
+    /// Mitsuba's `principled` (Burley's Disney BSDF).
+    Principled(Box<Principled>),
     /// Linear blend of two materials: (1 - weight) · first + weight · second.
     Blend(Box<(Bsdf, Bsdf)>, Param<f32>),
     /// Front material and back material (Mitsuba's `twosided`).
@@ -107,6 +111,7 @@ impl Bsdf {
                     })
                 }
             }
+            Bsdf::Principled(b) => b.sample(uv, wi, u1, u2, mode),
             Bsdf::Null => Some(BsdfSample {
                 wo: -wi,
                 weight: Rgb::ONE,
@@ -130,7 +135,7 @@ impl Bsdf {
                 // A smooth direction could have come from either lobe: use the mixture density.
                 let pdf = self.pdf(uv, wi, s.wo);
                 (pdf > 0.0).then(|| BsdfSample {
-                    weight: self.eval(uv, wi, s.wo) / pdf,
+                    weight: self.eval_mode(uv, wi, s.wo, mode) / pdf,
                     pdf,
                     ..s
                 })
@@ -147,25 +152,34 @@ impl Bsdf {
         }
     }
 
-    /// f(wi, wo) · |cos θo| of the non-delta lobes at `uv`.
+    /// f(wi, wo) · |cos θo| of the non-delta lobes at `uv`, for radiance (camera paths, light
+    /// sampling and photon gathering): where refraction treats the two transport modes
+    /// differently (the principled's transmission), [`Bsdf::sample`] applies the mode it is
+    /// given.
     pub fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+        self.eval_mode(uv, wi, wo, TransportMode::Radiance)
+    }
+
+    /// [`Bsdf::eval`] for either transport mode.
+    fn eval_mode(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => Rgb::ZERO,
-            Bsdf::RoughDielectric(b) => b.eval(uv, wi, wo),
+            Bsdf::RoughDielectric(b) => b.eval(uv, wi, wo, mode),
             Bsdf::Plastic(b) => b.eval(uv, wi, wo),
-            Bsdf::Mask(m) => m.0.eval(uv, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
+            Bsdf::Mask(m) => m.0.eval_mode(uv, wi, wo, mode) * m.1.at(uv).clamp(0.0, 1.0),
+            Bsdf::Principled(b) => b.eval(uv, wi, wo, mode),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
-                (1.0 - w) * pair.0.eval(uv, wi, wo) + w * pair.1.eval(uv, wi, wo)
+                (1.0 - w) * pair.0.eval_mode(uv, wi, wo, mode) + w * pair.1.eval_mode(uv, wi, wo, mode)
             }
             Bsdf::TwoSided(pair) => {
                 let flip = Vec3A::new(1.0, 1.0, -1.0);
                 if wi.z >= 0.0 {
-                    pair.0.eval(uv, wi, wo)
+                    pair.0.eval_mode(uv, wi, wo, mode)
                 } else {
-                    pair.1.eval(uv, wi * flip, wo * flip)
+                    pair.1.eval_mode(uv, wi * flip, wo * flip, mode)
                 }
             }
         }
@@ -180,6 +194,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(b) => b.pdf(uv, wi, wo),
             Bsdf::Plastic(b) => b.pdf(wi, wo),
             Bsdf::Mask(m) => m.0.pdf(uv, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
+            Bsdf::Principled(b) => b.pdf(uv, wi, wo),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
                 (1.0 - w) * pair.0.pdf(uv, wi, wo) + w * pair.1.pdf(uv, wi, wo)
@@ -201,6 +216,7 @@ impl Bsdf {
     pub fn gathers_photons(&self) -> bool {
         match self {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Principled(b) => b.gathers_photons(),
             // Rough glass is followed like rough metal: its lobes are too sharp to gather on.
             Bsdf::Conductor(_)
             | Bsdf::Dielectric(_)
@@ -214,10 +230,21 @@ impl Bsdf {
         }
     }
 
+    /// Whether the material depends on the orientation of the shading frame about the normal
+    /// (anisotropic roughness): only then is the frame's first tangent aligned with the
+    /// surface's ∂p/∂u, as Mitsuba aligns it.
+    pub fn is_anisotropic(&self) -> bool {
+        match self {
+            Bsdf::Principled(b) => b.is_anisotropic(),
+            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.is_anisotropic() || pair.1.is_anisotropic(),
+            _ => false,
+        }
+    }
+
     /// Whether any lobe is not a delta: only then do light sampling and photon gathering see it.
     pub fn has_smooth(&self) -> bool {
         match self {
-            Bsdf::Diffuse(_) | Bsdf::Plastic(_) => true,
+            Bsdf::Diffuse(_) | Bsdf::Plastic(_) | Bsdf::Principled(_) => true,
             Bsdf::Conductor(c) => c.roughness.is_some(),
             Bsdf::RoughDielectric(_) => true,
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => false,

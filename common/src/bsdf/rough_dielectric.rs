@@ -92,8 +92,8 @@ impl RoughDielectric {
         })
     }
 
-    /// f · |cos θo| for radiance (camera paths: the only ones that evaluate BSDFs).
-    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+    /// f · |cos θo|; transmission is scaled for radiance as in [`RoughDielectric::sample`].
+    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
         let cos_i = wi.z;
         if cos_i == 0.0 {
             return Rgb::ZERO;
@@ -109,9 +109,12 @@ impl RoughDielectric {
         if reflect {
             self.specular_reflectance.at(uv) * (f * d * g / (4.0 * cos_i.abs()))
         } else {
-            let inv_eta = 1.0 / eta;
+            let scale = match mode {
+                TransportMode::Radiance => 1.0 / (eta * eta),
+                TransportMode::Importance => 1.0,
+            };
             let denom = wi.dot(m) + eta * wo.dot(m);
-            let value = inv_eta * inv_eta * (1.0 - f) * d * g * eta * eta * wi.dot(m) * wo.dot(m)
+            let value = scale * (1.0 - f) * d * g * eta * eta * wi.dot(m) * wo.dot(m)
                 / (cos_i * denom * denom);
             self.specular_transmittance.at(uv) * value.abs()
         }

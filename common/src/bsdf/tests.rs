@@ -89,6 +89,124 @@ fn glass() -> Bsdf {
     })
 }
 
+/// A principled BSDF with Mitsuba's defaults, to be adjusted.
+fn principled_default() -> Principled {
+    Principled {
+        base_color: Rgb::splat(0.5).into(),
+        roughness: 0.5.into(),
+        anisotropic: 0.0.into(),
+        metallic: 0.0.into(),
+        spec_trans: 0.0.into(),
+        spec_tint: 0.0.into(),
+        sheen: 0.0.into(),
+        sheen_tint: 0.0.into(),
+        flatness: 0.0.into(),
+        clearcoat: 0.0.into(),
+        clearcoat_gloss: 0.0.into(),
+        eta: eta_from_specular(0.5),
+        diffuse_sampling_rate: 1.0,
+        specular_sampling_rate: 1.0,
+        clearcoat_sampling_rate: 1.0,
+    }
+}
+
+fn principled(f: impl FnOnce(&mut Principled)) -> Bsdf {
+    let mut p = principled_default();
+    f(&mut p);
+    Bsdf::Principled(Box::new(p))
+}
+
+/// Principled materials: every lobe, alone and together. The transmissive ones are seen from
+/// both sides (their `wi` below the surface is inside the material); the opaque ones sample
+/// nothing from below, and the chi-square test skips that side.
+fn principled_cases() -> Vec<(&'static str, Bsdf)> {
+    vec![
+        ("principled default", principled(|_| {})),
+        (
+            "principled dielectric-like",
+            principled(|p| {
+                p.base_color = Rgb::new(0.8, 0.3, 0.2).into();
+                p.roughness = 0.3.into();
+                p.eta = 1.5;
+                p.spec_tint = 0.4.into();
+            }),
+        ),
+        (
+            "principled metal",
+            principled(|p| {
+                p.base_color = Rgb::new(0.9, 0.6, 0.3).into();
+                p.metallic = 1.0.into();
+                p.roughness = 0.4.into();
+            }),
+        ),
+        (
+            "principled rough anisotropic half metal",
+            principled(|p| {
+                p.base_color = Rgb::new(0.3, 0.5, 0.8).into();
+                p.metallic = 0.5.into();
+                p.roughness = 0.6.into();
+                p.anisotropic = 0.8.into();
+            }),
+        ),
+        (
+            "principled sheen and clearcoat",
+            principled(|p| {
+                p.base_color = Rgb::new(0.2, 0.6, 0.3).into();
+                p.roughness = 0.7.into();
+                p.sheen = 1.0.into();
+                p.sheen_tint = 0.5.into();
+                p.clearcoat = 1.0.into();
+                p.clearcoat_gloss = 0.3.into();
+                p.flatness = 0.5.into();
+            }),
+        ),
+        (
+            "principled spec_trans",
+            principled(|p| {
+                p.base_color = Rgb::new(0.9, 0.9, 0.7).into();
+                p.roughness = 0.4.into();
+                p.spec_trans = 0.8.into();
+                p.eta = 1.5;
+            }),
+        ),
+        (
+            "principled anisotropic glass with everything",
+            principled(|p| {
+                p.base_color = Rgb::new(0.7, 0.8, 0.9).into();
+                p.roughness = 0.5.into();
+                p.anisotropic = 0.6.into();
+                p.spec_trans = 1.0.into();
+                p.metallic = 0.2.into();
+                p.spec_tint = 0.3.into();
+                p.sheen = 0.5.into();
+                p.clearcoat = 0.5.into();
+                p.clearcoat_gloss = 0.8.into();
+                p.eta = 1.33;
+                p.specular_sampling_rate = 2.0;
+                p.clearcoat_sampling_rate = 0.5;
+                p.diffuse_sampling_rate = 0.5;
+            }),
+        ),
+        (
+            // Textures at the test's (u, v): the base colour and metallic from a checkerboard.
+            "textured principled",
+            principled(|p| {
+                let checker = |a: f32, b: f32| {
+                    std::sync::Arc::new(crate::texture::Texture::Checkerboard {
+                        color0: Rgb::splat(a),
+                        color1: Rgb::splat(b),
+                        to_uv: glam::Affine2::IDENTITY,
+                    })
+                };
+                p.base_color = Param::Textured(checker(0.2, 0.7));
+                p.metallic = Param::Textured(checker(0.3, 0.6));
+                p.spec_trans = Param::Textured(checker(0.5, 0.0));
+                p.roughness = 0.45.into();
+            }),
+        ),
+    ]
+}
+
 /// The materials under test, each with a name for the failure message.
 fn cases() -> Vec<(&'static str, Bsdf)> {
     vec![
@@ -139,7 +257,25 @@ fn cases() -> Vec<(&'static str, Bsdf)> {
             "twosided diffuse/plastic",
             Bsdf::TwoSided(Box::new((diffuse(0.5), plastic(Some(0.3), 0.5)))),
         ),
+        (
+            // Through a blend, importance transport must reach the principled's transmission.
+            "blend diffuse/transmissive principled",
+            Bsdf::Blend(
+                Box::new((
+                    diffuse(0.6),
+                    principled(|p| {
+                        p.spec_trans = 0.9.into();
+                        p.roughness = 0.5.into();
+                        p.eta = 1.5;
+                    }),
+                )),
+                0.5.into(),
+            ),
+        ),
     ]
+    .into_iter()
+    .chain(principled_cases())
+    .collect()
 }
 
 fn incoming() -> Vec<Vec3A> {
@@ -241,24 +377,33 @@ fn sampled_directions_follow_the_pdf() {
 #[test]
 fn sample_weights_equal_eval_over_pdf() {
     for (name, b) in cases() {
-        for (k, wi) in incoming().into_iter().enumerate() {
-            let mut s = Sampler::new(12, Stream::Camera, k as u64, 0);
-            for _ in 0..2000 {
-                let u1 = s.next_1d();
-                let Some(bs) = b.sample(UV, wi, u1, s.next_2d(), TransportMode::Radiance) else {
-                    continue;
-                };
-                if bs.delta {
-                    continue;
+        for mode in [TransportMode::Radiance, TransportMode::Importance] {
+            for (k, wi) in incoming().into_iter().enumerate() {
+                let mut s = Sampler::new(12, Stream::Camera, k as u64, 0);
+                for _ in 0..2000 {
+                    let u1 = s.next_1d();
+                    let Some(bs) = b.sample(UV, wi, u1, s.next_2d(), mode) else {
+                        continue;
+                    };
+                    if bs.delta {
+                        continue;
+                    }
+                    let expect = b.eval_mode(UV, wi, bs.wo, mode) / b.pdf(UV, wi, bs.wo);
+                    let err = (bs.weight - expect).abs().max_element() / expect.max_element().max(1e-3);
+                    assert!(
+                        err < 1e-3,
+                        "{name}, {mode:?}: weight {} but eval/pdf {}",
+                        bs.weight,
+                        expect
+                    );
                 }
-                let expect = b.eval(UV, wi, bs.wo) / b.pdf(UV, wi, bs.wo);
-                let err = (bs.weight - expect).abs().max_element() / expect.max_element().max(1e-3);
-                assert!(err < 1e-3, "{name}: weight {} but eval/pdf {}", bs.weight, expect);
             }
         }
     }
 }
 
+/// Reflection only (both directions above the surface): the principled's lobes all are; its
+/// transmission is checked by `principled_transmission_obeys_generalised_reciprocity`.
 #[test]
 fn reflection_is_reciprocal() {
     let mut s = Sampler::new(13, Stream::Camera, 0, 0);
@@ -275,6 +420,148 @@ fn reflection_is_reciprocal() {
             assert!(
                 (f_ac - f_ca).abs().max_element() / scale < 1e-3,
                 "{name}: f({a}, {c}) = {f_ac} but f({c}, {a}) = {f_ca}"
+            );
+        }
+    }
+}
+
+/// Refraction is not reciprocal in the simple sense: for radiance, the transmission lobe obeys
+/// f(a, c) / η(a)² = f(c, a) / η(c)², η being the index on each direction's side. This checks
+/// the lobe's Jacobian and its radiance scaling together.
+#[test]
+fn principled_transmission_obeys_generalised_reciprocity() {
+    let mut s = Sampler::new(15, Stream::Camera, 0, 0);
+    for (name, b) in principled_cases() {
+        let Bsdf::Principled(p) = &b else { unreachable!() };
+        let mut checked = 0;
+        for _ in 0..2000 {
+            let a = crate::sampling::square_to_cosine_hemisphere(s.next_2d());
+            let c = -crate::sampling::square_to_cosine_hemisphere(s.next_2d());
+            if a.z < 1e-3 || c.z > -1e-3 {
+                continue;
+            }
+            let f_ac = b.eval(UV, a, c) / c.z.abs();
+            let f_ca = b.eval(UV, c, a) / a.z;
+            let (lhs, rhs) = (f_ac, f_ca / (p.eta * p.eta));
+            let scale = lhs.max_element().max(rhs.max_element());
+            if scale > 0.0 {
+                checked += 1;
+            }
+            assert!(
+                // Loose: the half vector's denominator η·(wo·h) + wi·h cancels in f32.
+                (lhs - rhs).abs().max_element() <= 1e-2 * scale.max(1e-4),
+                "{name}: f({a}, {c}) = {f_ac} but f({c}, {a}) / eta^2 = {rhs}"
+            );
+        }
+        let transmits = !matches!(p.spec_trans, Param::Fixed(t) if t == 0.0);
+        assert_eq!(checked > 0, transmits, "{name}: {checked} transmitting pairs");
+    }
+}
+
+/// The principled's albedo (importance transport, the mean sample weight) from each of the
+/// tests' incoming directions, against Mitsuba 3.9.1's own `principled` (llvm_ad_rgb, 10⁶
+/// samples per direction, the same parameters; rows in the order of `incoming()`): this checks every lobe's value, the lobe
+/// selection and the sampling at once, including the anisotropic lobe's orientation.
+#[test]
+fn principled_albedo_matches_mitsuba() {
+    #[rustfmt::skip]
+    let mitsuba: [(&str, [[f32; 3]; 6]); 7] = [
+        (
+            "principled default",
+            [
+                [0.5404, 0.5404, 0.5404],
+                [0.0000, 0.0000, 0.0000],
+                [0.5578, 0.5578, 0.5578],
+                [0.0000, 0.0000, 0.0000],
+                [0.6419, 0.6419, 0.6419],
+                [0.0000, 0.0000, 0.0000],
+            ],
+        ),
+        (
+            "principled dielectric-like",
+            [
+                [0.8511, 0.3342, 0.2308],
+                [0.0000, 0.0000, 0.0000],
+                [0.8684, 0.3529, 0.2499],
+                [0.0000, 0.0000, 0.0000],
+                [1.0123, 0.5285, 0.4317],
+                [0.0000, 0.0000, 0.0000],
+            ],
+        ),
+        (
+            "principled metal",
+            [
+                [0.8693, 0.5795, 0.2898],
+                [0.0000, 0.0000, 0.0000],
+                [0.8474, 0.5691, 0.2909],
+                [0.0000, 0.0000, 0.0000],
+                [0.7910, 0.5770, 0.3629],
+                [0.0000, 0.0000, 0.0000],
+            ],
+        ),
+        (
+            "principled rough anisotropic half metal",
+            [
+                [0.2702, 0.4407, 0.6965],
+                [0.0000, 0.0000, 0.0000],
+                [0.2782, 0.4506, 0.7092],
+                [0.0000, 0.0000, 0.0000],
+                [0.3121, 0.4952, 0.7699],
+                [0.0000, 0.0000, 0.0000],
+            ],
+        ),
+        (
+            "principled sheen and clearcoat",
+            [
+                [0.2344, 0.5943, 0.3244],
+                [0.0000, 0.0000, 0.0000],
+                [0.2617, 0.6699, 0.3638],
+                [0.0000, 0.0000, 0.0000],
+                [0.3606, 0.8726, 0.4886],
+                [0.0000, 0.0000, 0.0000],
+            ],
+        ),
+        (
+            "principled spec_trans",
+            [
+                [0.9456, 0.9456, 0.8199],
+                [0.7381, 0.7381, 0.6570],
+                [0.9438, 0.9438, 0.8209],
+                [0.7344, 0.7344, 0.7257],
+                [0.9256, 0.9256, 0.8191],
+                [0.6684, 0.6684, 0.6667],
+            ],
+        ),
+        (
+            "principled anisotropic glass with everything",
+            [
+                [0.8019, 0.8649, 0.9252],
+                [0.6204, 0.6616, 0.7004],
+                [0.7706, 0.8305, 0.8878],
+                [0.6139, 0.6292, 0.6436],
+                [0.7202, 0.7723, 0.8222],
+                [0.6009, 0.6029, 0.6048],
+            ],
+        ),
+    ];
+    let n = 200_000;
+    let cases = principled_cases();
+    for (name, expected) in mitsuba {
+        let b = &cases.iter().find(|(c, _)| *c == name).expect("a test case").1;
+        for (k, (wi, want)) in incoming().into_iter().zip(expected).enumerate() {
+            let mut s = Sampler::new(16, Stream::Camera, k as u64, 0);
+            let mut sum = Rgb::ZERO;
+            for _ in 0..n {
+                let u1 = s.next_1d();
+                if let Some(bs) = b.sample(UV, wi, u1, s.next_2d(), TransportMode::Importance) {
+                    sum += bs.weight;
+                }
+            }
+            let albedo = sum / n as f32;
+            let want = Rgb::from(want);
+            assert!(
+                (albedo - want).abs().max_element() < 0.006,
+                "{name}, wi {wi}: albedo {albedo}, Mitsuba's {want}"
             );
         }
     }
@@ -321,7 +608,16 @@ fn white_furnace_never_creates_energy() {
                 }
             }
             let albedo = sum / n as f32;
-            assert!(albedo.max_element() <= 1.01, "{name}, wi {wi}: albedo {albedo}");
+            // Burley's model adds its diffuse base to the specular lobe without coupling their
+            // energies: at grazing incidence a bright, tinted base reflects a little more than
+            // arrives. Mitsuba's own principled does so (albedo 1.012 in red at cos θ = 0.2,
+            // see `principled_albedo_matches_mitsuba`), so this one case gets a looser bound.
+            let limit = if name == "principled dielectric-like" && wi.z.abs() < 0.3 {
+                1.025
+            } else {
+                1.01
+            };
+            assert!(albedo.max_element() <= limit, "{name}, wi {wi}: albedo {albedo}");
             let lossless = matches!(name, "white diffuse" | "mirror") && wi.z > 0.0
                 || matches!(name, "glass" | "thin glass");
             if lossless {

@@ -24,6 +24,17 @@ impl Frame {
         }
     }
 
+    /// Mitsuba's shading frame: the first tangent is `dpdu` made orthogonal to `n` (Gram–Schmidt),
+    /// the second n × s; where `dpdu` is degenerate, [`Frame::from_normal`]. Anisotropic
+    /// materials need it: their roughness follows the surface's parameterisation.
+    pub fn from_normal_and_tangent(n: Vec3A, dpdu: Vec3A) -> Frame {
+        let s = (dpdu - n * n.dot(dpdu)).normalize_or_zero();
+        if s == Vec3A::ZERO {
+            return Frame::from_normal(n);
+        }
+        Frame { s, t: n.cross(s), n }
+    }
+
     /// World direction to local coordinates.
     #[inline]
     pub fn to_local(&self, v: Vec3A) -> Vec3A {
@@ -56,6 +67,14 @@ mod tests {
             assert!(f.s.dot(f.t).abs() < 1e-5 && f.s.dot(n).abs() < 1e-5);
             let v = Vec3A::new(0.2, 0.4, -0.7);
             assert!((f.to_world(f.to_local(v)) - v).length() < 1e-5);
+            for dpdu in [Vec3A::X, Vec3A::new(0.3, 2.0, -1.0), Vec3A::ZERO, n] {
+                let f = Frame::from_normal_and_tangent(n, dpdu);
+                assert!((f.s.length() - 1.0).abs() < 1e-5);
+                assert!((f.t.length() - 1.0).abs() < 1e-5);
+                assert!(f.s.dot(f.t).abs() < 1e-5 && f.s.dot(n).abs() < 1e-5);
+                assert!((f.s.cross(f.t) - n).length() < 1e-5);
+                assert!((f.to_world(f.to_local(v)) - v).length() < 1e-5);
+            }
         }
     }
 }

@@ -54,6 +54,9 @@ pub struct SurfacePoint {
     pub shape: u32,
     /// Texture coordinates, parameterised as Mitsuba's shapes are.
     pub uv: glam::Vec2,
+    /// ∂p/∂u as Mitsuba's shapes give it (direction only; may be zero where the
+    /// parameterisation is singular): anisotropic materials orient their frame by it.
+    pub dpdu: Vec3A,
 }
 
 impl SurfacePoint {
@@ -66,6 +69,7 @@ impl SurfacePoint {
             ns: Vec3A::ZERO,
             shape: u32::MAX,
             uv: glam::Vec2::ZERO,
+            dpdu: Vec3A::ZERO,
         }
     }
 }

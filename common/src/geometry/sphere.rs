@@ -83,6 +83,8 @@ impl Sphere {
             phi * std::f32::consts::FRAC_1_PI * 0.5,
             l.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
         );
+        // Mitsuba's ∂p/∂u: along the longitude, (−y, x, 0) in the sphere's frame.
+        let dpdu = Vec3A::from(self.rotation * glam::Vec3::new(-l.y, l.x, 0.0));
         let n = if self.flip { -n } else { n };
         SurfacePoint {
             p,
@@ -91,6 +93,7 @@ impl Sphere {
             ns: n,
             shape: self.shape,
             uv,
+            dpdu,
         }
     }
 }

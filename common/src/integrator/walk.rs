@@ -76,7 +76,12 @@ impl<'s> Hit<'s> {
     pub fn new(scene: &'s Scene, sp: SurfacePoint, wo: Vec3A) -> Hit<'s> {
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
-        let frame = Frame::from_normal(sp.ns);
+        // Isotropic materials do not depend on the tangents' orientation: the cheaper basis.
+        let frame = if bsdf.is_anisotropic() {
+            Frame::from_normal_and_tangent(sp.ns, sp.dpdu)
+        } else {
+            Frame::from_normal(sp.ns)
+        };
         let wo_local = frame.to_local(wo);
         Hit {
             sp,

@@ -12,8 +12,8 @@ use super::props::{Ctx, FileRoot, Props, Res};
 use super::xml::{self, Element};
 use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
 use crate::bsdf::{
-    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, RoughDielectric, Roughness,
-    ThinDielectric,
+    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, Principled, RoughDielectric,
+    Roughness, ThinDielectric, eta_from_specular,
 };
 use crate::camera::Camera;
 use crate::color::Rgb;
@@ -830,6 +830,7 @@ impl<'a> Builder<'a> {
                     roughness,
                 )))
             }
+            "principled" => Bsdf::Principled(Box::new(self.principled(&p)?)),
             "twosided" => {
                 let mut nested = self.nested_bsdfs(&p)?;
                 match nested.len() {
@@ -871,14 +872,92 @@ impl<'a> Builder<'a> {
                     el,
                     format!(
                         "bsdf type \"{other}\" is not supported (diffuse, conductor, roughconductor, \
-                         dielectric, roughdielectric, thindielectric, plastic, roughplastic, twosided, \
-                         blendbsdf, mask, null)"
+                         dielectric, roughdielectric, thindielectric, plastic, roughplastic, principled, \
+                         twosided, blendbsdf, mask, null)"
                     ),
                 ));
             }
         };
         p.finish()?;
         Ok(bsdf)
+    }
+
+    /// Mitsuba's `principled`: every parameter it reads, with its defaults. Its weights are
+    /// numbers in [0, 1] or textures; `eta` and `specular` (one or the other) are numbers.
+    fn principled(&mut self, p: &Props) -> Res<Principled> {
+        let mut weight = |name: &str, default: f32| -> Res<Param<f32>> {
+            let v = self.float_param(p, name, default)?;
+            if let Param::Fixed(x) = v
+                && !(0.0..=1.0).contains(&x)
+            {
+                return Err(p.err_at(name, format!("'{name}' must lie in [0, 1], not {x}")));
+            }
+            Ok(v)
+        };
+        let roughness = weight("roughness", 0.5)?;
+        let anisotropic = weight("anisotropic", 0.0)?;
+        let metallic = weight("metallic", 0.0)?;
+        let spec_trans = weight("spec_trans", 0.0)?;
+        let spec_tint = weight("spec_tint", 0.0)?;
+        let sheen = weight("sheen", 0.0)?;
+        let sheen_tint = weight("sheen_tint", 0.0)?;
+        let flatness = weight("flatness", 0.0)?;
+        let clearcoat = weight("clearcoat", 0.0)?;
+        let clearcoat_gloss = weight("clearcoat_gloss", 0.0)?;
+        // Mitsuba's get_flag: a transmission lobe exists when spec_trans is given and is not
+        // the number 0; then eta = 1 (or specular = 0) is nudged off the index-matched case.
+        let transmits = !matches!(spec_trans, Param::Fixed(t) if t == 0.0);
+        let eta = match (p.float("eta")?, p.float("specular")?) {
+            (Some(_), Some(_)) => {
+                return Err(self
+                    .ctx
+                    .err(p.el, "give either eta or specular (which sets eta), not both"));
+            }
+            (Some(eta), None) => {
+                if eta <= 0.0 {
+                    return Err(p.err_at("eta", format!("eta must be positive, not {eta}")));
+                }
+                if transmits && eta == 1.0 { 1.001 } else { eta }
+            }
+            (None, specular) => {
+                let specular = specular.unwrap_or(0.5);
+                if !(0.0..12.5).contains(&specular) {
+                    return Err(p.err_at(
+                        "specular",
+                        format!("specular must lie in [0, 12.5), not {specular}"),
+                    ));
+                }
+                eta_from_specular(if transmits && specular == 0.0 {
+                    1e-3
+                } else {
+                    specular
+                })
+            }
+        };
+        let rate = |name: &str| -> Res<f32> {
+            let v = p.float_or(name, 1.0)?;
+            if v < 0.0 {
+                return Err(p.err_at(name, format!("'{name}' cannot be negative, not {v}")));
+            }
+            Ok(v)
+        };
+        Ok(Principled {
+            base_color: self.color_param(p, "base_color", Rgb::splat(0.5))?,
+            roughness,
+            anisotropic,
+            metallic,
+            spec_trans,
+            spec_tint,
+            sheen,
+            sheen_tint,
+            flatness,
+            clearcoat,
+            clearcoat_gloss,
+            eta,
+            diffuse_sampling_rate: rate("diffuse_reflectance_sampling_rate")?,
+            specular_sampling_rate: rate("main_specular_sampling_rate")?,
+            clearcoat_sampling_rate: rate("clearcoat_sampling_rate")?,
+        })
     }
 
     /// A rough conductor's microfacets, whose `alpha` may be a texture.
