@@ -60,9 +60,19 @@ fn malformed_xml() {
 #[test]
 fn unknown_element() {
     expect_error(
+        &scene_text("<volume type=\"gridvolume\"/>", FILM),
+        8,
+        "<volume> is not supported",
+    );
+    expect_error(
         &scene_text("<texture type=\"bitmap\"/>", FILM),
         8,
-        "<texture> is not supported",
+        "a top-level <texture> needs an id",
+    );
+    expect_error(
+        &scene_text("<texture type=\"noise\" id=\"t\"/>", FILM),
+        8,
+        "texture type \"noise\" is not supported",
     );
     expect_error(
         &scene_text("<shape type=\"teapot\"/>", FILM),
@@ -311,7 +321,7 @@ fn missing_scene_file() {
         .unwrap_err()
         .to_string();
     assert!(
-        msg.starts_with("/nonexistent/scene.xml:0: ") && msg.contains("cannot read"),
+        msg.starts_with("/nonexistent/scene.xml: ") && msg.contains("cannot read"),
         "{msg}"
     );
 }
