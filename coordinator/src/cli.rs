@@ -44,8 +44,8 @@ pub enum Command {
 /// Where the coordinator is, for the job commands.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ConnectionArgs {
-    /// The coordinator's URL, e.g. http://render-host:8080.
-    #[arg(long)]
+    /// The coordinator's address, with http:// or https://, e.g. http://render-host:8080.
+    #[arg(long, value_name = "URL")]
     pub to: String,
     /// Bearer token, if the coordinator requires one.
     #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]

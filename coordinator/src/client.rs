@@ -29,9 +29,14 @@ impl ApiClient {
         }
     }
 
-    /// A client of the coordinator named on the command line (an empty token is none).
-    pub fn for_connection(conn: &crate::cli::ConnectionArgs) -> ApiClient {
-        ApiClient::new(&conn.to, conn.token.clone().filter(|t| !t.is_empty()))
+    /// A client of the coordinator named on the command line (an empty token is none); an
+    /// error if `--to` is not an http:// or https:// address.
+    pub fn for_connection(conn: &crate::cli::ConnectionArgs) -> anyhow::Result<ApiClient> {
+        check_address(&conn.to)?;
+        Ok(ApiClient::new(
+            &conn.to,
+            conn.token.clone().filter(|t| !t.is_empty()),
+        ))
     }
 
     fn req(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
@@ -117,17 +122,33 @@ impl ApiClient {
     }
 }
 
+/// Checks `--to` before anything is sent: without `http://` a request fails with an obscure
+/// "relative URL without a base" or "builder error".
+pub fn check_address(given: &str) -> anyhow::Result<()> {
+    let ok = reqwest::Url::parse(given)
+        .is_ok_and(|url| matches!(url.scheme(), "http" | "https") && url.host().is_some());
+    if !ok {
+        let example = if given.contains("://") || given.is_empty() {
+            "http://render-host:8080".to_string()
+        } else {
+            format!("http://{given}")
+        };
+        bail!("--to {given}: expected an http:// or https:// address, e.g. {example}");
+    }
+    Ok(())
+}
+
 /// Packs the scene, submits it, and with `--wait` follows the job and downloads the image.
 pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
     if let Some(out) = &args.out {
         check_output(out)?;
     }
+    let client = ApiClient::for_connection(&args.conn)?;
     let settings = args.job.settings()?;
     // Load locally first: a broken scene fails here, with its file and line, before uploading.
     let scene = Scene::load(&args.job.scene, &settings.defines)?;
     let (bundle, scene_in_bundle) = photonfarm::bundle::pack(&args.job.scene, &scene.files)?;
     let scene_name = scene_in_bundle.to_string_lossy().into_owned();
-    let client = ApiClient::for_connection(&args.conn);
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let job = client.submit(bundle, &scene_name, &settings).await?;
@@ -253,7 +274,7 @@ pub fn describe(s: &Value) -> String {
 pub fn run_job_command(command: &crate::cli::JobCommand) -> anyhow::Result<()> {
     use crate::cli::JobCommand;
     let conn = command.connection();
-    let client = ApiClient::for_connection(conn);
+    let client = ApiClient::for_connection(conn)?;
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         match command {
@@ -278,4 +299,33 @@ pub fn run_job_command(command: &crate::cli::JobCommand) -> anyhow::Result<()> {
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_address;
+
+    #[test]
+    fn the_address_needs_http_or_https() {
+        for ok in [
+            "http://localhost:8080",
+            "https://farm.example.com",
+            "http://10.0.0.2:8080/",
+        ] {
+            assert!(check_address(ok).is_ok(), "{ok}");
+        }
+        for (bad, example) in [
+            ("localhost:8080", "http://localhost:8080"),
+            ("render-host", "http://render-host"),
+            ("10.0.0.2:8080", "http://10.0.0.2:8080"),
+            ("ftp://render-host:8080", "http://render-host:8080"),
+            ("", "http://render-host:8080"),
+        ] {
+            let msg = check_address(bad).unwrap_err().to_string();
+            assert_eq!(
+                msg,
+                format!("--to {bad}: expected an http:// or https:// address, e.g. {example}")
+            );
+        }
+    }
 }

@@ -236,12 +236,16 @@ fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
 
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 
-fn chart(png: &Path, svg: &Path, title: &str, rows: &[Row]) -> anyhow::Result<()> {
-    // A font that ships with the program: the chart looks the same on every machine.
+/// A font that ships with the program: the chart looks the same on every machine.
+fn register_font() {
     static REGISTERED: std::sync::Once = std::sync::Once::new();
     REGISTERED.call_once(|| {
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
     });
+}
+
+fn chart(png: &Path, svg: &Path, title: &str, rows: &[Row]) -> anyhow::Result<()> {
+    register_font();
     {
         let root = BitMapBackend::new(png, (1000, 680)).into_drawing_area();
         draw(&root, title, rows)?;
@@ -273,20 +277,32 @@ where
     if x0 > x1 {
         (x0, x1, y0, y1) = (0.1, 1.0, 0.01, 0.1);
     }
+    let (x0, x1, y0, y1) = (x0 * 0.8, x1 * 1.25, y0 * 0.8, y1 * 1.25);
+    // Our own ticks: plotters' log-scale ticks repeat each decade's end (two "0.1" labels).
+    let (x_labels, x_grid) = log_ticks(x0, x1);
+    let (y_labels, y_grid) = log_ticks(y0, y1);
     let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 24))
         .margin(20)
         .x_label_area_size(50)
         .y_label_area_size(80)
         .build_cartesian_2d(
-            (x0 * 0.8..x1 * 1.25).log_scale(),
-            (y0 * 0.8..y1 * 1.25).log_scale(),
+            (x0..x1)
+                .log_scale()
+                .with_key_points(x_labels)
+                .with_light_points(x_grid),
+            (y0..y1)
+                .log_scale()
+                .with_key_points(y_labels)
+                .with_light_points(y_grid),
         )
         .map_err(err)?;
     chart
         .configure_mesh()
         .x_desc("render time (s)")
         .y_desc("RMSE against the reference")
+        .x_label_formatter(&|v| tick_label(*v))
+        .y_label_formatter(&|v| tick_label(*v))
         .label_style(("sans-serif", 16))
         .axis_desc_style(("sans-serif", 18))
         .draw()
@@ -317,4 +333,125 @@ where
         .draw()
         .map_err(err)?;
     Ok(())
+}
+
+/// Ticks of a log axis over [lo, hi]: the labelled ones (each decade's 1, 2, ..., 9 over up to
+/// 1.5 decades, its 1, 2 and 5 over up to 4, its 1 beyond; halves as well below 2 labels) and
+/// the grid lines (every 1, 2, ..., 9). Every value is the double nearest its decimal, m × 10^e,
+/// so that no two ticks coincide or print alike.
+pub fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return (Vec::new(), Vec::new());
+    }
+    let ticks = |mantissas: &[f64]| -> Vec<f64> {
+        let mut out = Vec::new();
+        for e in lo.log10().floor() as i32 - 1..=hi.log10().ceil() as i32 {
+            for m in mantissas {
+                let v: f64 = format!("{m}e{e}").parse().expect("a decimal number");
+                if (lo..=hi).contains(&v) {
+                    out.push(v);
+                }
+            }
+        }
+        out
+    };
+    let decades = (hi / lo).log10();
+    let all: Vec<f64> = (1..=9).map(f64::from).collect();
+    let labelled = if decades <= 1.5 {
+        ticks(&all)
+    } else if decades <= 4.0 {
+        ticks(&[1.0, 2.0, 5.0])
+    } else {
+        ticks(&[1.0])
+    };
+    if labelled.len() >= 2 {
+        return (labelled, ticks(&all));
+    }
+    let halves: Vec<f64> = (2..=19).map(|h| f64::from(h) / 2.0).collect();
+    (ticks(&halves), ticks(&halves))
+}
+
+/// A tick's label: the shortest decimal that reads back as the tick (`0.1`, `2`, `10`).
+pub fn tick_label(v: f64) -> String {
+    format!("{v}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_ticks_are_distinct_and_label_distinctly() {
+        for (lo, hi) in [
+            (0.0073, 0.17),
+            (0.2, 37.0),
+            (0.01, 0.1),
+            (1e-4, 10.0),
+            (0.05, 0.09),
+            (3.0, 3.5),
+            (0.25 * 0.8, 30.0 * 1.25),
+        ] {
+            let (labelled, grid) = log_ticks(lo, hi);
+            assert!(labelled.len() >= 2, "{lo}..{hi}: {labelled:?}");
+            for ticks in [&labelled, &grid] {
+                let labels: Vec<String> = ticks.iter().map(|&v| tick_label(v)).collect();
+                let mut unique = labels.clone();
+                unique.dedup();
+                assert_eq!(unique, labels, "{lo}..{hi}");
+                assert!(ticks.windows(2).all(|w| w[0] < w[1]), "{lo}..{hi}: {ticks:?}");
+                assert!(
+                    ticks.iter().all(|v| (lo..=hi).contains(v)),
+                    "{lo}..{hi}: {ticks:?}"
+                );
+            }
+        }
+        let (labelled, _) = log_ticks(0.0073, 0.17);
+        let labels: Vec<String> = labelled.iter().map(|&v| tick_label(v)).collect();
+        assert_eq!(labels[..3], ["0.008", "0.009", "0.01"]);
+        assert_eq!(labels.iter().filter(|l| *l == "0.1").count(), 1, "{labels:?}");
+        assert_eq!(log_ticks(0.2, 37.0).0, [0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0]);
+    }
+
+    /// A chart like the README's convergence figure (RMSE from 0.009 to 0.12) labels every
+    /// tick once: it used to print "0.1" twice, one over the other.
+    #[test]
+    fn the_chart_labels_each_tick_once() {
+        register_font();
+        let mut rows = Vec::new();
+        for (line, scale) in [("path", 0.14), ("sppm", 0.11)] {
+            let mut t = 0.25;
+            while t < 30.0 {
+                rows.push(Row {
+                    line: line.into(),
+                    seconds: t,
+                    passes: 1,
+                    rmse: scale * 0.42 / t.sqrt(),
+                    worst_mean_error: 0.0,
+                });
+                t *= std::f64::consts::SQRT_2;
+            }
+        }
+        let mut svg = String::new();
+        {
+            let root = SVGBackend::with_string(&mut svg, (1000, 680)).into_drawing_area();
+            draw(&root, "test", &rows).unwrap();
+            root.present().unwrap();
+        }
+        let texts: Vec<&str> = svg
+            .split("<text")
+            .skip(1)
+            .map(|t| t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].trim())
+            .collect();
+        for label in ["0.1", "0.01", "1", "10"] {
+            assert_eq!(
+                texts.iter().filter(|t| **t == label).count(),
+                1,
+                "{label} in {texts:?}"
+            );
+        }
+        let mut sorted = texts.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), texts.len(), "a label is repeated: {texts:?}");
+    }
 }

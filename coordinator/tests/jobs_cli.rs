@@ -70,3 +70,25 @@ fn jobs_status_wait_fetch_and_cancel() {
     let o = coordinator(&["status", "999", "--to", &url]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("404"));
 }
+
+/// An address without `http://` is refused at once with an example, by `submit` and by the job
+/// commands alike (it used to say "relative URL without a base").
+#[test]
+fn an_address_without_a_scheme_says_what_is_expected() {
+    let scene = cbox_spheres();
+    for args in [
+        &["submit", "--to", "localhost:8080", scene.to_str().unwrap()][..],
+        &["jobs", "--to", "localhost:8080"],
+        &["status", "1", "--to", "localhost:8080"],
+    ] {
+        let o = coordinator(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(
+                "--to localhost:8080: expected an http:// or https:// address, e.g. http://localhost:8080"
+            ),
+            "{args:?}: {err}"
+        );
+    }
+}

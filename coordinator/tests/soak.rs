@@ -94,7 +94,10 @@ async fn a_bounded_soak_keeps_the_farm_up() {
     // No pooled connections: the coordinator answers a refused upload before reading its body
     // and then closes the connection, and a request sent on that pooled connection in the
     // meantime would fail for the client's reuse, not for anything the coordinator did.
-    let http = reqwest::Client::builder().pool_max_idle_per_host(0).build().unwrap();
+    let http = reqwest::Client::builder()
+        .pool_max_idle_per_host(0)
+        .build()
+        .unwrap();
 
     // 300 slow, unauthenticated connections: half a request head each, then silence. They
     // used to take 300 descriptors; now at most 32 are accepted, and silent ones are closed.

@@ -39,10 +39,9 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     photonfarm::process::init_logging();
-    let name = args.name.unwrap_or_else(|| {
-        let host = std::env::var("HOSTNAME").unwrap_or_else(|_| "worker".into());
-        format!("{host}-{}", std::process::id())
-    });
+    let name = args
+        .name
+        .unwrap_or_else(|| default_name(&gethostname::gethostname().to_string_lossy(), std::process::id()));
     let config = worker::WorkerConfig {
         coordinator: args.coordinator,
         threads: args
@@ -81,5 +80,26 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         }
+    }
+}
+
+/// The default `--name`: the host name and the process id, e.g. `render-a-12345` (`worker-12345`
+/// if the host has no name).
+fn default_name(host: &str, pid: u32) -> String {
+    let host = host.trim();
+    let host = if host.is_empty() { "worker" } else { host };
+    format!("{host}-{pid}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::default_name;
+
+    #[test]
+    fn the_default_name_is_the_host_name_and_the_process_id() {
+        assert_eq!(default_name("render-a", 12345), "render-a-12345");
+        assert_eq!(default_name("", 7), "worker-7");
+        let host = gethostname::gethostname().to_string_lossy().into_owned();
+        assert!(!host.trim().is_empty(), "this machine has no host name");
     }
 }

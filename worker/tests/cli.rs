@@ -54,8 +54,50 @@ fn a_worker_says_what_is_wrong() {
     );
 
     // A token the coordinator refuses: five refusals in a row end the worker with exit code 3.
+    let (url, _bodies) = refusing_coordinator();
+    let mut child = Command::new(worker)
+        .args(["--coordinator", &url, "--threads", "1", "--token", "wrong"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Bounded: a worker that never gives up is killed and the test fails.
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() && start.elapsed() < std::time::Duration::from_secs(30) {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let _ = child.kill();
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains("refused this worker's token"), "{err}");
+}
+
+/// A worker named by nobody is named after its host and its process id, as `--help` says.
+#[test]
+fn the_default_name_is_the_host_name_and_the_process_id() {
+    let (url, bodies) = refusing_coordinator();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_worker"))
+        .args(["--coordinator", &url, "--threads", "1", "--token", "wrong"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let body = bodies
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("the worker asked for work");
+    let _ = child.kill();
+    let _ = child.wait();
+    let host = gethostname::gethostname().to_string_lossy().into_owned();
+    let request: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(request["worker"], format!("{host}-{pid}"), "{request}");
+}
+
+/// A coordinator that refuses every request with 401; the request bodies come out of the
+/// channel.
+fn refusing_coordinator() -> (String, std::sync::mpsc::Receiver<Vec<u8>>) {
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let url = format!("http://{}", listener.local_addr().unwrap());
+    let (send, receive) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         use std::io::{BufRead, BufReader, Read, Write};
         for stream in listener.incoming().flatten() {
@@ -73,24 +115,11 @@ fn a_worker_says_what_is_wrong() {
             }
             let mut body = vec![0u8; length];
             let _ = reader.read_exact(&mut body);
+            let _ = send.send(body);
             let _ = reader
                 .get_mut()
                 .write_all(b"HTTP/1.1 401 Unauthorized\r\ncontent-length: 0\r\nconnection: close\r\n\r\n");
         }
     });
-    let mut child = Command::new(worker)
-        .args(["--coordinator", &url, "--threads", "1", "--token", "wrong"])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Bounded: a worker that never gives up is killed and the test fails.
-    let start = std::time::Instant::now();
-    while child.try_wait().unwrap().is_none() && start.elapsed() < std::time::Duration::from_secs(30) {
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-    let _ = child.kill();
-    let o = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(3), "{err}");
-    assert!(err.contains("refused this worker's token"), "{err}");
+    (url, receive)
 }

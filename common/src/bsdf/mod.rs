@@ -8,18 +8,18 @@ mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
 mod plastic;
+mod principled;
 mod rough_dielectric;
 mod thin_dielectric;
-mod principled;
 
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use microfacet::{AnisotropicGgx, Distribution, Microfacet, Roughness};
 pub use plastic::Plastic;
+pub use principled::{Principled, eta_from_specular};
 pub use rough_dielectric::RoughDielectric;
 pub use thin_dielectric::ThinDielectric;
-pub use principled::{Principled, eta_from_specular};
 
 use glam::{Vec2, Vec3A};
 

@@ -114,8 +114,8 @@ impl RoughDielectric {
                 TransportMode::Importance => 1.0,
             };
             let denom = wi.dot(m) + eta * wo.dot(m);
-            let value = scale * (1.0 - f) * d * g * eta * eta * wi.dot(m) * wo.dot(m)
-                / (cos_i * denom * denom);
+            let value =
+                scale * (1.0 - f) * d * g * eta * eta * wi.dot(m) * wo.dot(m) / (cos_i * denom * denom);
             self.specular_transmittance.at(uv) * value.abs()
         }
     }
