@@ -9,9 +9,7 @@
 //! SPPM: means within 2% and error falling with iterations; in `environment.xml` the glass
 //! sphere's caustic on the floor is lit by the map alone, so photons from the map must carry it.
 
-use photonfarm_tests::{
-    check_declared_against_mitsuba, compare, load, reference, refs_dir, render_sppm, sppm_settings,
-};
+use photonfarm_tests::{check_declared_against_mitsuba, check_sppm_convergence};
 
 #[test]
 fn environment_map_matches_mitsuba() {
@@ -28,45 +26,19 @@ fn directional_sun_matches_mitsuba() {
     check_declared_against_mitsuba("sun");
 }
 
-fn sppm_converges(name: &str) {
-    let scene = load(&refs_dir().join(format!("{name}.xml")), &[]);
-    let settings = sppm_settings(&scene, 100_000);
-    let reference = reference(&format!("{name}.exr"));
-    let few = compare(&render_sppm(&scene, settings, 8, 1).image().unwrap(), &reference);
-    let many_film = render_sppm(&scene, settings, 64, 1);
-    assert_eq!(many_film.nonfinite, 0);
-    let many = compare(&many_film.image().unwrap(), &reference);
-    eprintln!(
-        "{name}, SPPM: rmse {:.4} at 8 iterations, {:.4} at 64; means {:?} vs {:?}, worst mean error {:.3}%",
-        few.mse.sqrt(),
-        many.mse.sqrt(),
-        many.mean,
-        many.reference_mean,
-        100.0 * many.worst_mean_error()
-    );
-    assert!(
-        many.worst_mean_error() < 0.02,
-        "{name}: a channel mean is off by more than 2%"
-    );
-    assert!(
-        many.mse < 0.5 * few.mse,
-        "{name}: the error does not fall with iterations"
-    );
-}
-
 /// Photons leave the environment map from a disk as wide as the scene, in proportion to the
 /// map's luminance: the caustic under the glass sphere comes from them.
 #[test]
 fn environment_map_caustic_with_sppm_matches_mitsuba() {
-    sppm_converges("environment");
+    check_sppm_convergence("environment");
 }
 
 #[test]
 fn constant_environment_with_sppm_matches_mitsuba() {
-    sppm_converges("constant");
+    check_sppm_convergence("constant");
 }
 
 #[test]
 fn directional_sun_with_sppm_matches_mitsuba() {
-    sppm_converges("sun");
+    check_sppm_convergence("sun");
 }

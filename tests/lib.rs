@@ -217,3 +217,35 @@ pub fn check_path_against_mitsuba(scene: &str, exr: &str, res: &str, spp: u64, m
     assert_eq!(film.nonfinite, 0);
     assert_matches_mitsuba(exr, &cmp, mitsuba_mse);
 }
+
+/// SPPM on `refs/NAME.xml` (100,000 photons per iteration) against `refs/NAME.exr`: at 64
+/// iterations every channel mean within 2%, and the MSE under half that at 8 iterations
+/// (variance and bias both fall; pure variance would give a factor 8).
+pub fn check_sppm_convergence(name: &str) {
+    let scene = load(&refs_dir().join(format!("{name}.xml")), &[]);
+    let settings = sppm_settings(&scene, 100_000);
+    let reference = reference(&format!("{name}.exr"));
+    let few = compare(&render_sppm(&scene, settings, 8, 1).image().unwrap(), &reference);
+    let many_film = render_sppm(&scene, settings, 64, 1);
+    assert_eq!(many_film.nonfinite, 0);
+    let many = compare(&many_film.image().unwrap(), &reference);
+    for (n, c) in [(8, &few), (64, &many)] {
+        eprintln!(
+            "{name}, SPPM {n} iterations: rmse {:.4}, means {:?} vs {:?}, worst mean error {:.3}%",
+            c.mse.sqrt(),
+            c.mean,
+            c.reference_mean,
+            100.0 * c.worst_mean_error()
+        );
+    }
+    assert!(
+        many.worst_mean_error() < 0.02,
+        "{name}: a channel mean is off by more than 2%: {many:?}"
+    );
+    assert!(
+        many.mse < 0.5 * few.mse,
+        "{name}: MSE {:.3e} at 64 iterations vs {:.3e} at 8",
+        many.mse,
+        few.mse
+    );
+}

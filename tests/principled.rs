@@ -11,9 +11,7 @@ use std::path::Path;
 
 use photonfarm::bsdf::Bsdf;
 use photonfarm::scene::Scene;
-use photonfarm_tests::{
-    check_declared_against_mitsuba, compare, load, reference, refs_dir, render_sppm, sppm_settings,
-};
+use photonfarm_tests::{check_declared_against_mitsuba, check_sppm_convergence};
 
 #[test]
 fn principled_matches_mitsuba() {
@@ -25,32 +23,7 @@ fn principled_matches_mitsuba() {
 /// miss) the camera path follows the BSDF, as it does through rough metals.
 #[test]
 fn principled_sppm_converges_to_mitsuba() {
-    let scene = load(&refs_dir().join("principled.xml"), &[]);
-    let settings = sppm_settings(&scene, 100_000);
-    let reference = reference("principled.exr");
-    let few = compare(&render_sppm(&scene, settings, 8, 1).image().unwrap(), &reference);
-    let many_film = render_sppm(&scene, settings, 64, 1);
-    assert_eq!(many_film.nonfinite, 0);
-    let many = compare(&many_film.image().unwrap(), &reference);
-    for (n, c) in [(8, &few), (64, &many)] {
-        eprintln!(
-            "principled, SPPM {n} iterations: mse {:.3e}, means {:?} vs {:?}, worst mean error {:.3}%",
-            c.mse,
-            c.mean,
-            c.reference_mean,
-            100.0 * c.worst_mean_error()
-        );
-    }
-    assert!(
-        many.worst_mean_error() < 0.02,
-        "a channel mean is off by more than 2%: {many:?}"
-    );
-    assert!(
-        many.mse < 0.5 * few.mse,
-        "MSE {:.3e} at 64 iterations vs {:.3e} at 8",
-        many.mse,
-        few.mse
-    );
+    check_sppm_convergence("principled");
 }
 
 /// A scene with one principled material made of `params`.

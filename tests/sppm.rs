@@ -3,60 +3,23 @@
 
 use photonfarm::render::{Method, RenderSettings, render_passes, render_sppm_iterations};
 use photonfarm_tests::{
-    Comparison, channel_means, compare, load, reference, refs_dir, render_sppm, scenes_dir, sppm_settings,
+    channel_means, check_sppm_convergence, load, refs_dir, render_sppm, scenes_dir, sppm_settings,
 };
-
-fn converge(scene_name: &str, exr: &str) -> (Comparison, Comparison) {
-    let scene = load(&refs_dir().join(scene_name), &[]);
-    let settings = sppm_settings(&scene, 100_000);
-    let reference = reference(exr);
-    let few = render_sppm(&scene, settings, 8, 1);
-    let many = render_sppm(&scene, settings, 64, 1);
-    let a = compare(&few.image().unwrap(), &reference);
-    let b = compare(&many.image().unwrap(), &reference);
-    for (n, c) in [(8, &a), (64, &b)] {
-        eprintln!(
-            "{exr}, SPPM {n} iterations: rmse {:.4}, means {:?} vs {:?}, worst mean error {:.3}%",
-            c.mse.sqrt(),
-            c.mean,
-            c.reference_mean,
-            100.0 * c.worst_mean_error()
-        );
-    }
-    assert_eq!(many.nonfinite, 0);
-    (a, b)
-}
-
-fn check_convergence(scene_name: &str, exr: &str) {
-    let (few, many) = converge(scene_name, exr);
-    assert!(
-        many.worst_mean_error() < 0.02,
-        "{exr}: a channel mean is off by more than 2%: {many:?}"
-    );
-    // Consistency: 8 times the iterations must cut the error substantially (variance and bias
-    // both fall; pure variance would give a factor 8 in MSE).
-    assert!(
-        many.mse < 0.5 * few.mse,
-        "{exr}: MSE {:.3e} at 64 iterations vs {:.3e} at 8",
-        many.mse,
-        few.mse
-    );
-}
 
 #[test]
 fn cbox_sppm_converges_to_mitsuba() {
-    check_convergence("cbox.xml", "cbox.exr");
+    check_sppm_convergence("cbox");
 }
 
 #[test]
 fn cbox_spheres_sppm_converges_to_mitsuba() {
-    check_convergence("cbox-spheres.xml", "cbox-spheres.exr");
+    check_sppm_convergence("cbox-spheres");
 }
 
 /// Glossy and coated materials: rough metals are followed by BSDF sampling, plastics gathered.
 #[test]
 fn materials_sppm_converges_to_mitsuba() {
-    check_convergence("materials.xml", "materials.exr");
+    check_sppm_convergence("materials");
 }
 
 /// Smooth-shaded meshes. (`lights.xml` is left out on purpose: its glass sphere casts a caustic
@@ -64,7 +27,7 @@ fn materials_sppm_converges_to_mitsuba() {
 /// cannot; without the sphere SPPM matches the path tracer to 0.5%.)
 #[test]
 fn meshes_sppm_converges_to_mitsuba() {
-    check_convergence("meshes.xml", "meshes.exr");
+    check_sppm_convergence("meshes");
 }
 
 /// The closed sphere lit from its centre: radiance 1 everywhere, within 2.5%.
@@ -142,12 +105,12 @@ fn bad_parameters_are_refused() {
 /// photons and the camera pass read the same textures at the same (u, v).
 #[test]
 fn textures_sppm_converges_to_mitsuba() {
-    check_convergence("textures.xml", "textures.exr");
+    check_sppm_convergence("textures");
 }
 
 /// Rough glass, a thin pane and a mask: the camera pass follows rough glass by BSDF sampling
 /// (as rough metal), photons cross all three.
 #[test]
 fn rough_glass_sppm_converges_to_mitsuba() {
-    check_convergence("rough-glass.xml", "rough-glass.exr");
+    check_sppm_convergence("rough-glass");
 }

@@ -83,6 +83,23 @@ pub fn refract(wi: Vec3A, cos_t: f32, eta_ti: f32) -> Vec3A {
     Vec3A::new(-eta_ti * wi.x, -eta_ti * wi.y, cos_t)
 }
 
+/// The generalised half vector from `wi` to `wo` across an interface of relative index `eta`
+/// (inside over outside), turned to +z, whether the two are on one side (a reflection), and the
+/// relative index seen from `wi`'s side; None when either is grazing or the half vector is
+/// undefined. Rough glass and the principled BSDF's transmission share it.
+pub fn half_vector(wi: Vec3A, wo: Vec3A, eta: f32) -> Option<(Vec3A, bool, f32)> {
+    let reflect = wi.z * wo.z > 0.0;
+    if !reflect && wi.z * wo.z == 0.0 {
+        return None;
+    }
+    let eta_path = if wi.z > 0.0 { eta } else { 1.0 / eta };
+    let m = (wi + wo * if reflect { 1.0 } else { eta_path }).normalize_or_zero();
+    if m == Vec3A::ZERO {
+        return None;
+    }
+    Some((if m.z < 0.0 { -m } else { m }, reflect, eta_path))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

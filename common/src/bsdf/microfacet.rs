@@ -98,24 +98,14 @@ impl Microfacet {
         }
     }
 
-    /// Heitz's exact sampling of GGX's visible normals.
+    /// Heitz's exact sampling of GGX's visible normals (the anisotropic code with equal
+    /// roughnesses: the same arithmetic).
     fn sample_visible_ggx(&self, wi: Vec3A, u: Vec2) -> Vec3A {
-        let a = self.alpha;
-        let vh = Vec3A::new(a * wi.x, a * wi.y, wi.z).normalize();
-        let len2 = vh.x * vh.x + vh.y * vh.y;
-        let t1 = if len2 > 0.0 {
-            Vec3A::new(-vh.y, vh.x, 0.0) / len2.sqrt()
-        } else {
-            Vec3A::X
-        };
-        let t2 = vh.cross(t1);
-        let r = u.x.sqrt();
-        let phi = 2.0 * PI * u.y;
-        let p1 = r * phi.cos();
-        let s = 0.5 * (1.0 + vh.z);
-        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * phi.sin();
-        let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
-        Vec3A::new(a * nh.x, a * nh.y, nh.z.max(1e-7)).normalize()
+        AnisotropicGgx {
+            alpha_u: self.alpha,
+            alpha_v: self.alpha,
+        }
+        .sample_visible(wi, u)
     }
 
     /// Beckmann's visible normals: stretch the view to unit roughness, draw slopes with Jakob's

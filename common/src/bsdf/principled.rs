@@ -263,18 +263,7 @@ impl Principled {
     /// The half vector of `wi` and `wo` (oriented to +z) and whether they are on the same side:
     /// None for grazing or degenerate configurations.
     fn half_vector(&self, wi: Vec3A, wo: Vec3A) -> Option<(Vec3A, bool)> {
-        let (cos_i, cos_o) = (wi.z, wo.z);
-        let reflect = cos_i * cos_o > 0.0;
-        let refract = cos_i * cos_o < 0.0;
-        if !(reflect || refract) {
-            return None;
-        }
-        let eta_path = if cos_i > 0.0 { self.eta } else { 1.0 / self.eta };
-        let wh = (wi + wo * if reflect { 1.0 } else { eta_path }).normalize_or_zero();
-        if wh == Vec3A::ZERO {
-            return None;
-        }
-        Some((if wh.z < 0.0 { -wh } else { wh }, reflect))
+        super::fresnel::half_vector(wi, wo, self.eta).map(|(m, reflect, _)| (m, reflect))
     }
 
     pub(super) fn sample(

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3A};
 
-use super::fresnel::{fresnel_dielectric, reflect_about};
+use super::fresnel::{fresnel_dielectric, half_vector, reflect_about};
 use super::microfacet::Roughness;
 use super::{BsdfSample, TransportMode};
 use crate::color::Rgb;
@@ -28,15 +28,6 @@ fn mulsign(v: Vec3A, cos: f32) -> Vec3A {
 }
 
 impl RoughDielectric {
-    /// The half vector of `wi` and `wo` (generalised for refraction), in the upper hemisphere;
-    /// whether they are on one side; and the relative index seen from `wi`'s side.
-    fn half_vector(&self, wi: Vec3A, wo: Vec3A) -> (Vec3A, bool, f32) {
-        let reflect = wi.z * wo.z > 0.0;
-        let eta = if wi.z > 0.0 { self.eta } else { 1.0 / self.eta };
-        let m = (wi + wo * if reflect { 1.0 } else { eta }).normalize_or_zero();
-        (mulsign(m, m.z), reflect, eta)
-    }
-
     pub(super) fn sample(
         &self,
         uv: Vec2,
@@ -98,7 +89,9 @@ impl RoughDielectric {
         if cos_i == 0.0 {
             return Rgb::ZERO;
         }
-        let (m, reflect, eta) = self.half_vector(wi, wo);
+        let Some((m, reflect, eta)) = half_vector(wi, wo, self.eta) else {
+            return Rgb::ZERO;
+        };
         let mf = self.roughness.at(uv);
         let d = mf.d(m);
         if d == 0.0 {
@@ -125,7 +118,9 @@ impl RoughDielectric {
         if cos_i == 0.0 {
             return 0.0;
         }
-        let (m, reflect, eta) = self.half_vector(wi, wo);
+        let Some((m, reflect, eta)) = half_vector(wi, wo, self.eta) else {
+            return 0.0;
+        };
         // Where the microsurface and the macrosurface disagree on the side, sampling never goes.
         if wi.dot(m) * cos_i <= 0.0 || wo.dot(m) * wo.z <= 0.0 {
             return 0.0;
