@@ -60,6 +60,8 @@ pub struct AppState {
     pub upload_slots: Semaphore,
     /// Scene checks at once (loading a scene can take many times its files' size).
     pub scene_checks: Semaphore,
+    /// What `/metrics` reports beyond the farm's state.
+    pub metrics: crate::metrics::Metrics,
 }
 
 /// An error response.
@@ -112,6 +114,7 @@ pub fn router(state: Arc<AppState>) -> Router {
     let upload = DefaultBodyLimit::max(state.admission.max_upload as usize);
     Router::new()
         .route("/healthz", get(|| async { Json(json!({ "status": "ok" })) }))
+        .route("/metrics", get(metrics))
         .route("/api/jobs", post(submit).layer(upload).get(list))
         .route("/api/jobs/{id}", get(status).delete(cancel))
         .route("/api/jobs/{id}/{file}", get(image))
@@ -436,6 +439,26 @@ fn accept_bundle(
     Ok((StatusCode::CREATED, Json(body)).into_response())
 }
 
+/// The farm in Prometheus' text format (see [`crate::metrics`]); the users' token, as for jobs.
+async fn metrics(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
+    let snapshot = with_farm(&state, |f| {
+        Ok(crate::metrics::Snapshot {
+            jobs: f.list(),
+            workers: f.workers_present(),
+            leases: f.live_leases(),
+        })
+    })?;
+    let text = state.metrics.encode(&snapshot);
+    Ok((
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        text,
+    )
+        .into_response())
+}
+
 async fn list(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
     let jobs = with_farm(&state, |f| Ok(f.list()))?;
     Ok(Json(json!({ "jobs": jobs })).into_response())
@@ -646,8 +669,10 @@ fn merge(
     };
     // The prefix file first: the checkpoint images must never be ahead of it.
     let storage = |e| ApiError::internal(format!("storage: {e}"));
+    let started = std::time::Instant::now();
     state.layout.write_prefix(job, acc.prefix()).map_err(storage)?;
     state.layout.write_images(job, image).map_err(storage)?;
+    state.metrics.observe_checkpoint(started.elapsed());
     let (prefix, image_passes) = (acc.prefix_passes(), image.passes);
     drop(acc);
     with_farm(state, |f| f.checkpointed(job, prefix, Some(image_passes)))

@@ -606,6 +606,16 @@ impl Farm {
         })
     }
 
+    /// Leases held now (batches being rendered).
+    pub fn live_leases(&self) -> usize {
+        self.lease_keys.len()
+    }
+
+    /// Workers that asked for work lately.
+    pub fn workers_present(&self) -> usize {
+        self.scheduler.workers_present()
+    }
+
     /// Every job, oldest first.
     pub fn list(&self) -> Vec<JobStatus> {
         self.jobs.keys().filter_map(|&id| self.status(id)).collect()

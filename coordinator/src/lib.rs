@@ -11,6 +11,7 @@ pub mod client;
 pub mod connections;
 pub mod converge;
 pub mod farm;
+pub mod metrics;
 pub mod progress;
 pub mod render_command;
 pub mod resume;

@@ -56,6 +56,7 @@ pub async fn run(
         uploads: AtomicU64::new(0),
         upload_slots: Semaphore::new(admission.max_uploads.max(1)),
         scene_checks: Semaphore::new(admission.max_scene_checks.max(1)),
+        metrics: Default::default(),
     });
     // Leases without heartbeats expire; check several times per timeout.
     let period = Duration::from_millis((config.farm.scheduler.lease_timeout_ms / 10).clamp(10, 1000));
