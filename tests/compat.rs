@@ -94,3 +94,13 @@ fn mitsuba_docs_depth_inf_path_and_sppm_match_mitsuba() {
     eprintln!("depth-inf SPPM: means {:?} vs {:?}", cmp.mean, cmp.reference_mean);
     assert!(cmp.worst_mean_error() < 0.02, "{cmp:?}");
 }
+
+/// `tests/scenes/texture_interp/test_texture_interp_direct.xml`, one of Mitsuba's own texture
+/// tests: one PNG on rectangles with repeat, mirror and clamp wrapping, bilinear and nearest
+/// filtering and `to_uv` transforms, under a point light with the `direct` integrator (inside
+/// `moment`, whose extra channels we do not write).
+#[test]
+fn mitsuba_tests_texture_interp_matches_mitsuba() {
+    let scene = refs_dir().join("mitsuba-data/tests/scenes/texture_interp/test_texture_interp_direct.xml");
+    check_scene_against_mitsuba(&scene, &[], "mitsuba-texture-interp");
+}
