@@ -121,6 +121,13 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         FilmSum::new(scene.width(), scene.height())
     };
     let done = prefix.passes;
+    if done > total {
+        bail!(
+            "--resume: {} already holds {done} {unit}, more than the {total} asked for (ask for at \
+             least {done})",
+            sums_path.display()
+        );
+    }
     scheduler.add_job(0, total, window, done, &[(0, done)], JobState::Queued);
     let mut acc = Accumulator::new(prefix, window);
     let save_every = Duration::from_secs_f64(save_every);

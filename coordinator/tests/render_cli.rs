@@ -376,6 +376,16 @@ fn resume_after_sigkill_gives_the_uninterrupted_bytes() {
     assert!(err.contains("different scene or settings"), "{err}");
     assert!(sums.exists());
 
+    // Fewer passes than the sums already hold cannot be given back.
+    let o = coordinator()
+        .args(["render", scene.to_str().unwrap(), "-D", "res=24", "--spp", "1"])
+        .args(["--threads", "1", "--out", out.to_str().unwrap(), "--resume"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("more than the 1 asked for"), "{err}");
+
     let o = render(&["--resume"], &out).output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
