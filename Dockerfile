@@ -1,10 +1,15 @@
 # Builds both programs; the same image runs the coordinator and the workers.
-FROM rust:1.95-bookworm AS build
+# The base images are build arguments so that a host without Docker Hub can use local
+# stand-ins (deploy/test-compose.sh makes them); the defaults are the Hub's images.
+ARG BUILD_IMAGE=rust:1.95-bookworm
+ARG RUNTIME_IMAGE=debian:bookworm-slim
+
+FROM ${BUILD_IMAGE} AS build
 WORKDIR /src
 COPY . .
 RUN cargo build --release --locked -p coordinator -p worker
 
-FROM debian:bookworm-slim
+FROM ${RUNTIME_IMAGE}
 RUN useradd --system --create-home --home-dir /var/lib/photonfarm photonfarm \
     && mkdir -p /data && chown photonfarm /data
 COPY --from=build /src/target/release/coordinator /src/target/release/worker /usr/local/bin/
