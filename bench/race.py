@@ -1,0 +1,148 @@
+#!/usr/bin/env python3
+"""Equal-time race against Mitsuba 3: renders each scene with our path tracer and SPPM and with
+Mitsuba 3's path integrator for the same wall time, back to back, and prints each one's RMSE
+against the scene's Mitsuba reference, the samples (or iterations) reached, and the ratios.
+
+Mitsuba comes from PyPI into a local virtual environment that this script makes if it is missing
+(never in CI):
+
+    python3 bench/race.py                       # 60 s per renderer and scene
+    python3 bench/race.py --seconds 20 --only cbox
+
+It needs `target/release/coordinator` (`cargo build --release -p coordinator`) and, for
+Mitsuba's LLVM variant, Debian's libllvm19 (DRJIT_LIBLLVM_PATH is set below if the library is
+there). Wall time includes loading the scene and, for Mitsuba, its JIT compilation, as a user
+would wait for them.
+"""
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED = os.path.join(ROOT, "..", "shared", "scenes-ref")
+REFS = os.path.join(ROOT, "tests", "refs")
+LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"
+
+# name, scene, reference, defines: every scene's reference is Mitsuba 3.9.1's.
+SCENES = [
+    ("cbox", os.path.join(SHARED, "cbox.xml"), os.path.join(SHARED, "cbox.exr"), {"res": "256"}),
+    ("cbox-spheres", os.path.join(SHARED, "cbox-spheres.xml"), os.path.join(SHARED, "cbox-spheres.exr"),
+     {"res": "256"}),
+    ("fog", os.path.join(REFS, "fog.xml"), os.path.join(REFS, "fog.exr"), {"res": "64"}),
+    ("lights (thin lens, spot, glass)", os.path.join(REFS, "lights.xml"), os.path.join(REFS, "lights.exr"),
+     {"res": "128"}),
+    ("textures", os.path.join(REFS, "textures.xml"), os.path.join(REFS, "textures.exr"), {}),
+    ("environment", os.path.join(REFS, "environment.xml"), os.path.join(REFS, "environment.exr"), {}),
+]
+
+
+def ensure_mitsuba(venv):
+    """The Python of a virtual environment with Mitsuba and NumPy, made on first use."""
+    py = os.path.join(venv, "bin", "python")
+    if not os.path.exists(py):
+        print(f"making {venv} with Mitsuba 3 from PyPI ...", file=sys.stderr)
+        subprocess.run([sys.executable, "-m", "venv", venv], check=True)
+        subprocess.run([py, "-m", "pip", "install", "-q", "mitsuba", "numpy"], check=True)
+    return py
+
+
+MITSUBA_WORKER = r'''
+import json, sys, time
+import numpy as np
+import mitsuba as mi
+mi.set_variant("llvm_ad_rgb")
+scene_path, ref_path, seconds, defines = sys.argv[1], sys.argv[2], float(sys.argv[3]), json.loads(sys.argv[4])
+start = time.time()
+scene = mi.load_file(scene_path, **defines)
+ref = np.array(mi.Bitmap(ref_path).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, False))
+acc, spp, chunk, seed = None, 0, 8, 0
+while time.time() - start < seconds:
+    img = np.array(mi.render(scene, spp=chunk, seed=seed))[..., :3]
+    acc = img * chunk if acc is None else acc + img * chunk
+    spp += chunk
+    seed += 1
+img = acc / spp
+print(json.dumps({"spp": spp, "rmse": float(np.sqrt(np.mean((img - ref) ** 2))), "seconds": time.time() - start}))
+'''
+
+RMSE = r'''
+import json, sys
+import numpy as np
+import mitsuba as mi
+mi.set_variant("scalar_rgb")
+load = lambda p: np.array(mi.Bitmap(p).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, False))
+a, b = load(sys.argv[1]), load(sys.argv[2])
+print(json.dumps({"rmse": float(np.sqrt(np.mean((a - b) ** 2)))}))
+'''
+
+
+def ours(coordinator, scene, ref, defines, method, seconds, py):
+    with tempfile.TemporaryDirectory() as d:
+        out = os.path.join(d, "out.exr")
+        cmd = [coordinator, "render", scene, "--integrator", method, "--time-limit", str(seconds), "--out", out]
+        for k, v in defines.items():
+            cmd += ["-D", f"{k}={v}"]
+        start = time.time()
+        p = subprocess.run(cmd, capture_output=True, text=True)
+        took = time.time() - start
+        if p.returncode != 0:
+            return {"error": p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"}
+        m = re.search(r"wrote .* \((\d+) (passes|iterations)", p.stderr)
+        passes = int(m.group(1)) if m else None
+        r = subprocess.run([py, "-c", RMSE, out, ref], capture_output=True, text=True)
+        if r.returncode != 0:
+            return {"error": (r.stderr.strip().splitlines() or ["cannot compare"])[-1]}
+        return {"spp": passes, "rmse": json.loads(r.stdout)["rmse"], "seconds": took}
+
+
+def mitsuba(py, scene, ref, defines, seconds):
+    env = dict(os.environ)
+    if os.path.exists(LLVM):
+        env.setdefault("DRJIT_LIBLLVM_PATH", LLVM)
+    p = subprocess.run([py, "-c", MITSUBA_WORKER, scene, ref, str(seconds), json.dumps(defines)],
+                       capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        return {"error": (p.stderr.strip().splitlines() or ["failed"])[-1]}
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def cell(r):
+    if "error" in r:
+        return "error: " + r["error"][:40]
+    return f"{r['rmse']:.4f} ({r['spp']})"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=60.0, help="wall time per renderer and scene")
+    ap.add_argument("--only", action="append", help="race only scenes whose name starts with this")
+    ap.add_argument("--venv", default=os.path.join(ROOT, ".mitsuba"), help="Mitsuba's virtual environment")
+    ap.add_argument("--coordinator", default=os.path.join(ROOT, "target", "release", "coordinator"))
+    args = ap.parse_args()
+    if not os.path.exists(args.coordinator):
+        sys.exit(f"{args.coordinator} is missing: cargo build --release -p coordinator")
+    py = ensure_mitsuba(args.venv)
+    print(f"equal-time race, {args.seconds:g} s per renderer and scene, on {os.cpu_count()} cores; "
+          "RMSE against Mitsuba 3.9.1 references (samples or iterations reached)")
+    print("| scene | ours, path | ours, SPPM | Mitsuba 3, path | best of ours / Mitsuba (RMSE) | path spp ours / Mitsuba |")
+    print("|---|---|---|---|---|---|")
+    for name, scene, ref, defines in SCENES:
+        if args.only and not any(name.startswith(o) for o in args.only):
+            continue
+        path = ours(args.coordinator, scene, ref, defines, "path", args.seconds, py)
+        sppm = ours(args.coordinator, scene, ref, defines, "sppm", args.seconds, py)
+        mi_r = mitsuba(py, scene, ref, defines, args.seconds)
+        best = min((r["rmse"] for r in (path, sppm) if "error" not in r), default=float("nan"))
+        ratio = best / mi_r["rmse"] if "error" not in mi_r else float("nan")
+        spp_ratio = (path["spp"] / mi_r["spp"]) if "error" not in path and "error" not in mi_r and path["spp"] else float("nan")
+        print(f"| {name} | {cell(path)} | {cell(sppm)} | {cell(mi_r)} | {ratio:.2f} | {spp_ratio:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
