@@ -132,7 +132,7 @@ pub async fn run(
                 continue;
             }
         };
-        match work_on(&client, &config, &pool, &mut scenes, lease.clone()).await {
+        match work_on(&client, &config, &pool, &mut scenes, &outbox, lease.clone()).await {
             Ok(Some(parcel)) => {
                 deliver(&client, &outbox, &parcel, &mut trouble, &mut stop_rx).await?;
             }
@@ -291,6 +291,7 @@ async fn work_on(
     config: &WorkerConfig,
     pool: &Arc<rayon::ThreadPool>,
     scenes: &mut SceneCache,
+    outbox: &Outbox,
     lease: Lease,
 ) -> anyhow::Result<Option<Parcel>> {
     let scene = load_scene(client, config, scenes, &lease).await?;
@@ -352,7 +353,7 @@ async fn work_on(
         start: lease.start,
         end: lease.end,
     };
-    Outbox::open(&config.cache)?.put(&parcel, &encode_batch(&sum))?;
+    outbox.put(&parcel, &encode_batch(&sum))?;
     Ok(Some(parcel))
 }
 
