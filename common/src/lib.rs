@@ -16,6 +16,7 @@ pub mod job;
 pub mod light;
 pub mod limits;
 pub mod medium;
+pub mod parity;
 #[cfg(feature = "process")]
 pub mod process;
 pub mod protocol;

@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::film::FilmSum;
+use crate::parity::{OddSums, sample_len};
 use crate::render::RenderSettings;
 
 /// A worker asking for work.
@@ -60,7 +61,14 @@ pub fn max_encoded_batch(width: u32, height: u32) -> u64 {
     // Magic, then bincode varints: at most 5 bytes per u32, 9 per u64 (the two vectors'
     // lengths included) and 10 per zigzag i64: three sums per pixel and, with a filter wider
     // than a box, one weight.
-    MAGIC.len() as u64 + 2 * 5 + 4 * 9 + width as u64 * height as u64 * 40
+    // The odd passes' sample (see [`crate::parity`]) adds its lengths, its pass count and at
+    // most 40 bytes per sampled pixel.
+    MAGIC.len() as u64
+        + 2 * 5
+        + 4 * 9
+        + width as u64 * height as u64 * 40
+        + 3 * 9
+        + sample_len(width, height) as u64 * 40
 }
 
 /// The coordinator's answer to a heartbeat.
@@ -90,6 +98,49 @@ pub enum CodecError {
 }
 
 const MAGIC: &[u8; 8] = b"PFBATCH1";
+/// A result with its odd passes' sample: [`encode_result`].
+const MAGIC_WITH_ODD: &[u8; 8] = b"PFBATCH2";
+
+/// A batch's result: its exact sum and, from workers that send it, the sums of its odd passes
+/// on the sampled pixels (for the noise estimate; see [`crate::parity`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct BatchResult {
+    /// Every pass of the batch, summed: what the image is made of.
+    pub sum: FilmSum,
+    /// The odd passes on the sampled pixels; None from a worker that does not send them.
+    pub odd: Option<OddSums>,
+}
+
+/// Encodes a result with its odd passes' sample (`PFBATCH2`): the full sum is encoded exactly
+/// as by [`encode_batch`], followed by the sample.
+pub fn encode_result(sum: &FilmSum, odd: &OddSums) -> Vec<u8> {
+    let mut out = MAGIC_WITH_ODD.to_vec();
+    out.extend(
+        bincode::serde::encode_to_vec((sum, odd), bincode::config::standard()).expect("sums always encode"),
+    );
+    out
+}
+
+/// Decodes a result, with ([`encode_result`]) or without ([`encode_batch`]) its odd passes'
+/// sample, and checks that it is whole.
+pub fn decode_result(bytes: &[u8]) -> Result<BatchResult, CodecError> {
+    let Some(body) = bytes.strip_prefix(MAGIC_WITH_ODD.as_slice()) else {
+        return decode_batch(bytes).map(|sum| BatchResult { sum, odd: None });
+    };
+    let ((sum, odd), used): ((FilmSum, OddSums), usize) =
+        bincode::serde::decode_from_slice(body, bincode::config::standard())
+            .map_err(|e| CodecError::Decode(e.to_string()))?;
+    if used != body.len() {
+        return Err(CodecError::Invalid(format!(
+            "{} trailing bytes",
+            body.len() - used
+        )));
+    }
+    check_sum(&sum)?;
+    odd.check(sum.width, sum.height, sum.passes)
+        .map_err(CodecError::Invalid)?;
+    Ok(BatchResult { sum, odd: Some(odd) })
+}
 
 /// Encodes a partial image.
 pub fn encode_batch(sum: &FilmSum) -> Vec<u8> {
@@ -113,6 +164,12 @@ pub fn decode_batch(bytes: &[u8]) -> Result<FilmSum, CodecError> {
             body.len() - used
         )));
     }
+    check_sum(&sum)?;
+    Ok(sum)
+}
+
+/// Checks that a decoded sum's vectors fit its size.
+fn check_sum(sum: &FilmSum) -> Result<(), CodecError> {
     if !sum.weights.is_empty() && sum.weights.len() != sum.sums.len() {
         return Err(CodecError::Invalid(format!(
             "{} pixel weights for {} pixels",
@@ -128,7 +185,7 @@ pub fn decode_batch(bytes: &[u8]) -> Result<FilmSum, CodecError> {
             sum.height
         )));
     }
-    Ok(sum)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -156,5 +213,30 @@ mod tests {
         worst.passes = u64::MAX;
         worst.nonfinite = u64::MAX;
         assert!(encode_batch(&worst).len() as u64 <= max_encoded_batch(3, 2));
+        let odd_worst = OddSums {
+            sums: vec![[i64::MIN; 3]; 6],
+            weights: vec![i64::MIN; 6],
+            passes: u64::MAX,
+        };
+        assert!(encode_result(&worst, &odd_worst).len() as u64 <= max_encoded_batch(3, 2));
+    }
+
+    #[test]
+    fn results_with_odd_passes_round_trip_and_old_ones_still_decode() {
+        let mut f = FilmSum::new(3, 2);
+        f.sums[1] = [5, 6, 7];
+        f.passes = 3;
+        let mut odd = OddSums::empty(3, 2);
+        odd.sums[1] = [2, 2, 2];
+        odd.passes = 1;
+        let r = decode_result(&encode_result(&f, &odd)).unwrap();
+        assert_eq!((r.sum, r.odd), (f.clone(), Some(odd.clone())));
+        assert_eq!(decode_result(&encode_batch(&f)).unwrap().odd, None);
+        // More odd passes than passes, or a sample of the wrong size, is refused.
+        odd.passes = 4;
+        assert!(decode_result(&encode_result(&f, &odd)).is_err());
+        assert!(decode_result(&encode_result(&f, &OddSums::empty(2, 2))).is_err());
+        let bytes = encode_result(&f, &OddSums::empty(3, 2));
+        assert!(decode_result(&bytes[..bytes.len() - 1]).is_err());
     }
 }

@@ -1,30 +1,64 @@
 //! Adds batch results up in pass order, so that the image at every checkpoint is exactly the
 //! image of passes [0, N): byte-identical whichever workers rendered them and in whatever order
 //! they arrived.
+//!
+//! Beside the prefix it sums the prefix's odd passes on the sampled pixels
+//! ([`photonfarm::parity`]), and estimates the image's noise from them as the prefix grows.
 
 use std::collections::BTreeMap;
 
 use photonfarm::film::{FilmError, FilmSum};
+use photonfarm::parity::{self, OddSums};
 
 /// The running sum of a job.
 #[derive(Debug)]
 pub struct Accumulator {
     /// Passes [0, prefix.passes), summed.
     prefix: FilmSum,
+    /// The prefix's odd passes on the sampled pixels; None once a result without them (from
+    /// an older worker) was merged: the job then has no noise estimate.
+    odd: Option<OddSums>,
     /// Results that arrived ahead of a gap, by first pass.
-    pending: BTreeMap<u64, FilmSum>,
+    pending: BTreeMap<u64, (FilmSum, Option<OddSums>)>,
     /// Checkpoints fall on multiples of this.
     checkpoint_every: u64,
+    /// Passes at the latest noise estimate reported.
+    noise_passes: u64,
+}
+
+/// What merging a result did.
+#[derive(Debug, Default)]
+pub struct Merged {
+    /// A copy of the prefix at each checkpoint (a multiple of the interval) it reached.
+    pub checkpoints: Vec<FilmSum>,
+    /// Whether the prefix moved.
+    pub moved: bool,
+    /// (passes, estimated variance) as the prefix grew: at checkpoints, and otherwise at
+    /// least 5% apart in passes, so a long job's chart stays a few hundred points.
+    pub noise: Vec<(u64, f64)>,
 }
 
 impl Accumulator {
-    /// Starts from `prefix` (passes [0, prefix.passes) already summed).
-    pub fn new(prefix: FilmSum, checkpoint_every: u64) -> Accumulator {
+    /// Starts from `prefix` (passes [0, prefix.passes) already summed) and its odd passes'
+    /// sample, if known.
+    pub fn new(prefix: FilmSum, odd: Option<OddSums>, checkpoint_every: u64) -> Accumulator {
+        let noise_passes = prefix.passes;
         Accumulator {
             prefix,
+            odd,
             pending: BTreeMap::new(),
             checkpoint_every: checkpoint_every.max(1),
+            noise_passes,
         }
+    }
+
+    /// An empty sum of a `width` × `height` image.
+    pub fn empty(width: u32, height: u32, checkpoint_every: u64) -> Accumulator {
+        Accumulator::new(
+            FilmSum::new(width, height),
+            Some(OddSums::empty(width, height)),
+            checkpoint_every,
+        )
     }
 
     /// The same sum with checkpoints every `window` passes.
@@ -48,10 +82,14 @@ impl Accumulator {
         &self.prefix
     }
 
-    /// Adds the result of passes [start, start + sum.passes). Returns the pass counts at which
-    /// the prefix reached a checkpoint (a multiple of the interval) while merging, each with a
-    /// copy of the prefix at that moment, and whether the prefix moved.
-    pub fn add(&mut self, start: u64, sum: FilmSum) -> Result<(Vec<FilmSum>, bool), FilmError> {
+    /// The prefix's odd passes on the sampled pixels, if known.
+    pub fn odd(&self) -> Option<&OddSums> {
+        self.odd.as_ref()
+    }
+
+    /// Adds the result of passes [start, start + sum.passes), with its odd passes' sample
+    /// (None: not sent; a one-pass result's is known from its parity).
+    pub fn add(&mut self, start: u64, sum: FilmSum, odd: Option<OddSums>) -> Result<Merged, FilmError> {
         if (sum.width, sum.height) != (self.prefix.width, self.prefix.height) {
             return Err(FilmError::SizeMismatch(
                 sum.width,
@@ -60,27 +98,49 @@ impl Accumulator {
                 self.prefix.height,
             ));
         }
+        let mut merged = Merged::default();
         if start < self.prefix.passes {
             // Already merged. Cannot happen: a lease restored after a restart covers only
             // passes not yet stored; this guards the invariant.
-            return Ok((Vec::new(), false));
+            return Ok(merged);
         }
-        self.pending.insert(start, sum);
-        let mut checkpoints = Vec::new();
-        let mut moved = false;
-        while let Some(next) = self.pending.remove(&self.prefix.passes) {
+        let odd = odd.or_else(|| match sum.passes {
+            1 if start % 2 == 1 => Some(OddSums::of(&sum)),
+            1 => Some(OddSums::empty(sum.width, sum.height)),
+            _ => None,
+        });
+        self.pending.insert(start, (sum, odd));
+        while let Some((next, next_odd)) = self.pending.remove(&self.prefix.passes) {
             self.prefix.add(&next)?;
-            moved = true;
-            if self.prefix.passes.is_multiple_of(self.checkpoint_every) {
-                checkpoints.push(self.prefix.clone());
+            self.odd = match (self.odd.take(), next_odd) {
+                (Some(mut mine), Some(theirs)) => {
+                    mine.add(&theirs);
+                    Some(mine)
+                }
+                _ => None,
+            };
+            merged.moved = true;
+            let passes = self.prefix.passes;
+            let checkpoint = passes.is_multiple_of(self.checkpoint_every);
+            if checkpoint {
+                merged.checkpoints.push(self.prefix.clone());
+            }
+            if (checkpoint || passes * 20 >= self.noise_passes * 21)
+                && let Some(v) = self.odd.as_ref().and_then(|o| parity::noise(&self.prefix, o))
+            {
+                merged.noise.push((passes, v));
+                self.noise_passes = passes;
             }
         }
-        Ok((checkpoints, moved))
+        Ok(merged)
     }
 
     /// Ranges of results held ahead of a gap.
     pub fn pending_ranges(&self) -> Vec<(u64, u64)> {
-        self.pending.iter().map(|(&s, f)| (s, s + f.passes)).collect()
+        self.pending
+            .iter()
+            .map(|(&s, (f, _))| (s, s + f.passes))
+            .collect()
     }
 }
 
@@ -97,17 +157,41 @@ mod tests {
 
     #[test]
     fn merges_in_order_and_reports_checkpoints() {
-        let mut a = Accumulator::new(FilmSum::new(1, 1), 4);
-        let (cp, moved) = a.add(2, part(3, 2)).unwrap();
-        assert!(cp.is_empty() && !moved);
-        let (cp, moved) = a.add(0, part(1, 2)).unwrap();
-        assert!(moved);
-        assert_eq!(cp.len(), 1);
-        assert_eq!(cp[0].passes, 4);
-        assert_eq!(cp[0].sums[0][0], 4);
-        let (cp, _) = a.add(4, part(5, 3)).unwrap();
-        assert!(cp.is_empty());
+        let mut a = Accumulator::empty(1, 1, 4);
+        let m = a.add(2, part(3, 2), None).unwrap();
+        assert!(m.checkpoints.is_empty() && !m.moved);
+        let m = a.add(0, part(1, 2), None).unwrap();
+        assert!(m.moved);
+        assert_eq!(m.checkpoints.len(), 1);
+        assert_eq!(m.checkpoints[0].passes, 4);
+        assert_eq!(m.checkpoints[0].sums[0][0], 4);
+        let m = a.add(4, part(5, 3), None).unwrap();
+        assert!(m.checkpoints.is_empty());
         assert_eq!(a.prefix_passes(), 7);
-        assert!(a.add(0, FilmSum::new(2, 1)).is_err());
+        assert!(a.add(0, FilmSum::new(2, 1), None).is_err());
+        assert!(
+            a.odd().is_none(),
+            "results without their odd passes end the estimate"
+        );
+    }
+
+    /// One-pass results need no odd sample: their parity says which half they belong to.
+    #[test]
+    fn one_pass_results_estimate_noise_by_their_parity() {
+        let mut a = Accumulator::empty(1, 1, 2);
+        let mut points = Vec::new();
+        // Even passes are 1, odd ones 3: the halves' means differ by 2, so the estimate is
+        // 2² · We·Wo / W²: 1 with equal halves, 8/9 with two even passes and one odd.
+        for pass in [1u64, 0, 3, 2] {
+            let v = if pass % 2 == 0 { 1 } else { 3 };
+            points.extend(a.add(pass, part(v << 24, 1), None).unwrap().noise);
+        }
+        assert_eq!(a.odd().unwrap().passes, 2);
+        let want = [(2, 1.0), (3, 8.0 / 9.0), (4, 1.0)];
+        assert_eq!(points.len(), want.len(), "{points:?}");
+        for (got, want) in points.iter().zip(want) {
+            assert_eq!(got.0, want.0);
+            assert!((got.1 - want.1).abs() < 1e-12, "{points:?}");
+        }
     }
 }

@@ -18,7 +18,7 @@ use axum::routing::{get, post, put};
 use axum::{Json, Router};
 use photonfarm::bundle::BundleError;
 use photonfarm::job::JobSettings;
-use photonfarm::protocol::{LEASE_KEY_HEADER, LeaseRequest, Release, decode_batch, max_encoded_batch};
+use photonfarm::protocol::{LEASE_KEY_HEADER, LeaseRequest, Release, decode_result, max_encoded_batch};
 use photonfarm::render::Method;
 use serde_json::json;
 use sha2::{Digest, Sha256};
@@ -117,7 +117,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/metrics", get(metrics))
         .route("/api/jobs", post(submit).layer(upload).get(list))
         .route("/api/jobs/{id}", get(status).delete(cancel))
+        .route("/api/jobs/{id}/noise", get(noise))
         .route("/api/jobs/{id}/{file}", get(image))
+        .route("/api/workers", get(workers))
+        .merge(crate::web::routes())
         .route("/api/bundles/{hash}", get(bundle))
         .route("/api/lease", post(lease).layer(DefaultBodyLimit::max(JSON_LIMIT)))
         .route("/api/leases/{id}/heartbeat", post(heartbeat))
@@ -138,9 +141,13 @@ pub fn router(state: Arc<AppState>) -> Router {
 }
 
 /// The token a request's path needs: workers' routes need the worker token, the rest the
-/// client token; `/healthz` takes either.
+/// client token; `/healthz` takes either; the web page's files need none (they hold no data:
+/// the page asks the API for everything, with the token its user types in).
 async fn auth(State(state): State<Arc<AppState>>, headers: HeaderMap, req: Request, next: Next) -> Response {
     let path = req.uri().path();
+    if crate::web::is_asset(path) {
+        return next.run(req).await;
+    }
     let worker_route =
         path == "/api/lease" || path.starts_with("/api/leases/") || path.starts_with("/api/bundles/");
     let wanted: Vec<&String> = if path == "/healthz" {
@@ -401,10 +408,7 @@ fn accept_bundle(
     // Everything that takes time or memory, before the lock: the empty sum, the archive and
     // its unpacked files in their content-addressed places.
     let window = settings.checkpoint_every.unwrap_or(0);
-    let sum = Accumulator::new(
-        photonfarm::film::FilmSum::new(checked.width, checked.height),
-        window,
-    );
+    let sum = Accumulator::empty(checked.width, checked.height, window);
     let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
     if !stored.exists() {
         std::fs::rename(archive, &stored).map_err(ApiError::internal)?;
@@ -457,6 +461,21 @@ async fn metrics(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
         text,
     )
         .into_response())
+}
+
+/// `GET /api/jobs/{id}/noise`: the job's noise estimates as its passes arrived.
+async fn noise(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> ApiResult<Response> {
+    let id = parse_id(&id)?;
+    let (points, sum) = with_farm(&state, |f| f.noise(id))?;
+    // Read from the job's sum, under its own lock, never while holding the farm's.
+    let tracking = sum.is_none_or(|s| s.lock().unwrap_or_else(|p| p.into_inner()).odd().is_some());
+    Ok(Json(crate::farm::NoiseReport { id, tracking, points }).into_response())
+}
+
+/// `GET /api/workers`: the workers seen lately, for users (the users' token).
+async fn workers(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
+    let workers = with_farm(&state, |f| Ok(f.workers()))?;
+    Ok(Json(json!({ "workers": workers })).into_response())
 }
 
 async fn list(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
@@ -606,16 +625,28 @@ fn store_result(
     body: Bytes,
 ) -> ApiResult<()> {
     let len = body.len() as u64;
-    let sum = match decode_batch(&body) {
-        Ok(sum)
-            if (sum.width, sum.height) == (expected.width, expected.height)
-                && sum.passes == expected.end - expected.start =>
+    // Odd passes in [start, end): those the odd-pass sample, if sent, must hold.
+    let odd_passes = expected.end / 2 - expected.start / 2;
+    let (sum, odd) = match decode_result(&body) {
+        Ok(r)
+            if (r.sum.width, r.sum.height) == (expected.width, expected.height)
+                && r.sum.passes == expected.end - expected.start
+                && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes) =>
         {
-            sum
+            (r.sum, r.odd)
         }
         other => {
             let msg = match other {
-                Ok(sum) => format!(
+                Ok(r)
+                    if r.sum.passes == expected.end - expected.start
+                        && (r.sum.width, r.sum.height) == (expected.width, expected.height) =>
+                {
+                    format!(
+                        "expected {odd_passes} odd passes in the odd-pass sample, got {}",
+                        r.odd.map_or(0, |o| o.passes)
+                    )
+                }
+                Ok(photonfarm::protocol::BatchResult { sum, .. }) => format!(
                     "expected {}x{} and {} passes, got {}x{} and {}",
                     expected.width,
                     expected.height,
@@ -641,11 +672,13 @@ fn store_result(
         sum: job_sum,
         total,
     } = with_farm(state, |f| f.commit(id, key, len))?;
-    merge(state, job, &job_sum, total, expected.start, sum)
+    merge(state, job, &job_sum, total, expected.start, sum, odd)
 }
 
 /// Adds a counted result to its job's sum under the job's lock; writes the prefix and the
-/// images at a checkpoint or at the end, then tells the farm.
+/// images at a checkpoint or at the end; then tells the farm the noise estimates and the
+/// checkpoint (the farm's lock is never taken under the job's).
+#[allow(clippy::too_many_arguments)]
 fn merge(
     state: &AppState,
     job: u64,
@@ -653,29 +686,41 @@ fn merge(
     total: u64,
     start: u64,
     sum: photonfarm::film::FilmSum,
+    odd: Option<photonfarm::parity::OddSums>,
 ) -> ApiResult<()> {
     let mut acc = job_sum.lock().unwrap_or_else(|p| p.into_inner());
-    let (checkpoints, _) = acc
-        .add(start, sum)
+    let merged = acc
+        .add(start, sum, odd)
         .map_err(|e| ApiError::internal(format!("job {job}: {e}")))?;
     let finished = acc.prefix_passes() >= total;
     let image = if finished {
         Some(acc.prefix())
     } else {
-        checkpoints.last()
+        merged.checkpoints.last()
     };
-    let Some(image) = image else {
-        return Ok(());
+    let written = match image {
+        None => None,
+        Some(image) => {
+            // The prefix file first: the checkpoint images must never be ahead of it.
+            let storage = |e| ApiError::internal(format!("storage: {e}"));
+            let started = std::time::Instant::now();
+            state
+                .layout
+                .write_prefix(job, acc.prefix(), acc.odd())
+                .map_err(storage)?;
+            state.layout.write_images(job, image).map_err(storage)?;
+            state.metrics.observe_checkpoint(started.elapsed());
+            Some((acc.prefix_passes(), image.passes))
+        }
     };
-    // The prefix file first: the checkpoint images must never be ahead of it.
-    let storage = |e| ApiError::internal(format!("storage: {e}"));
-    let started = std::time::Instant::now();
-    state.layout.write_prefix(job, acc.prefix()).map_err(storage)?;
-    state.layout.write_images(job, image).map_err(storage)?;
-    state.metrics.observe_checkpoint(started.elapsed());
-    let (prefix, image_passes) = (acc.prefix_passes(), image.passes);
     drop(acc);
-    with_farm(state, |f| f.checkpointed(job, prefix, Some(image_passes)))
+    with_farm(state, |f| {
+        f.record_noise(job, &merged.noise);
+        match written {
+            Some((prefix, image_passes)) => f.checkpointed(job, prefix, Some(image_passes)),
+            None => Ok(()),
+        }
+    })
 }
 
 async fn release(

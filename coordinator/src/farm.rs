@@ -21,6 +21,7 @@ use serde::Serialize;
 use crate::accumulator::Accumulator;
 use crate::scheduler::{Grant, JobState, LeaseError, Scheduler, SchedulerConfig};
 use crate::store::{JobRow, JobStats, Layout, LeaseRow, Store, StoreError};
+use crate::workers::{Holding, Roster, WorkerStatus};
 
 /// Farm settings.
 #[derive(Clone, Copy, Debug)]
@@ -131,6 +132,32 @@ struct JobEntry {
     before: JobStats,
     batches_received: u64,
     bytes_received: u64,
+    /// Noise estimates (passes, variance), by passes; those from `noise_saved` on are not in
+    /// the database yet (they are saved at the next checkpoint).
+    noise: Vec<(u64, f64)>,
+    noise_saved: usize,
+}
+
+/// What `GET /api/jobs/{id}/noise` answers.
+#[derive(Clone, Debug, Serialize)]
+pub struct NoiseReport {
+    /// The job.
+    pub id: u64,
+    /// Whether the estimate is being followed: false once a result without its odd passes
+    /// (from an older worker) was merged.
+    pub tracking: bool,
+    /// (passes, estimated variance of the image), by passes.
+    pub points: Vec<NoisePoint>,
+}
+
+/// One noise estimate.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct NoisePoint {
+    /// Passes in the image.
+    pub passes: u64,
+    /// Estimated variance of the image: its expected mean squared error, over pixels and
+    /// channels, against the converged image.
+    pub variance: f64,
 }
 
 impl JobEntry {
@@ -194,6 +221,8 @@ pub struct Farm {
     lease_keys: HashMap<u64, String>,
     /// Seeds the lease secrets (randomly keyed by the standard library per process).
     key_source: std::collections::hash_map::RandomState,
+    /// The workers seen lately.
+    roster: Roster,
 }
 
 fn unix_ms() -> u64 {
@@ -275,6 +304,7 @@ impl Farm {
             default_checkpoint: config.default_checkpoint,
             lease_keys,
             key_source: std::collections::hash_map::RandomState::new(),
+            roster: Roster::default(),
         })
     }
 
@@ -371,6 +401,7 @@ impl Farm {
     pub fn lease(&mut self, req: &LeaseRequest) -> Result<Option<Lease>, FarmError> {
         let now = self.now();
         let key = self.new_key();
+        self.roster.asked(&req.worker, req.threads);
         let Some(g) = self.scheduler.lease(&req.worker, now) else {
             return Ok(None);
         };
@@ -417,6 +448,9 @@ impl Farm {
         self.check_key(lease_id, key)?;
         let now = self.now();
         let deadline = self.scheduler.heartbeat(lease_id, now)?;
+        if let Some(worker) = self.scheduler.lease_worker(lease_id) {
+            self.roster.heard(worker);
+        }
         Ok(HeartbeatReply {
             deadline_ms: deadline.saturating_sub(now),
         })
@@ -449,7 +483,12 @@ impl Farm {
     pub fn commit(&mut self, lease_id: u64, key: &str, bytes: u64) -> Result<Committed, FarmError> {
         self.check_key(lease_id, key)?;
         let now = self.now();
+        let worker = self.scheduler.lease_worker(lease_id).map(str::to_string);
         let g: Grant = self.scheduler.complete(lease_id, now)?;
+        if let Some(worker) = worker {
+            let rate = self.scheduler.worker_rate(g.job_id, &worker).unwrap_or(0.0);
+            self.roster.delivered(&worker, g.end - g.start, rate);
+        }
         self.store.record_batch(g.job_id, g.start, g.end)?;
         self.forget_lease(lease_id)?;
         let job = self.jobs.get_mut(&g.job_id).expect("known");
@@ -478,6 +517,10 @@ impl Farm {
     ) -> Result<(), FarmError> {
         self.store.forget_merged(job_id, prefix_passes)?;
         let job = self.jobs.get_mut(&job_id).ok_or(FarmError::NoJob(job_id))?;
+        if job.noise_saved < job.noise.len() {
+            self.store.save_noise(job_id, &job.noise[job.noise_saved..])?;
+            job.noise_saved = job.noise.len();
+        }
         if let Some(p) = image_passes
             && p > job.image_passes
         {
@@ -637,6 +680,49 @@ impl Farm {
         }
     }
 
+    /// Records noise estimates of a job as its prefix grew (saved at its next checkpoint).
+    pub fn record_noise(&mut self, job_id: u64, points: &[(u64, f64)]) {
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            for &p in points {
+                if job.noise.last().is_none_or(|l| l.0 < p.0) {
+                    job.noise.push(p);
+                }
+            }
+        }
+    }
+
+    /// A job's noise estimates. `tracking` is read from its sum, which the caller locks
+    /// (None for a job that is over: its estimates are all there).
+    pub fn noise(&self, id: u64) -> Result<(Vec<NoisePoint>, Option<JobSum>), FarmError> {
+        let job = self.jobs.get(&id).ok_or(FarmError::NoJob(id))?;
+        let points = job
+            .noise
+            .iter()
+            .map(|&(passes, variance)| NoisePoint { passes, variance })
+            .collect();
+        Ok((points, job.sum.clone()))
+    }
+
+    /// The workers seen lately, with the batches they hold.
+    pub fn workers(&self) -> Vec<WorkerStatus> {
+        let holding: Vec<(String, Holding)> = self
+            .scheduler
+            .holdings()
+            .into_iter()
+            .map(|(w, g)| {
+                (
+                    w,
+                    Holding {
+                        job: g.job_id,
+                        start: g.start,
+                        end: g.end,
+                    },
+                )
+            })
+            .collect();
+        self.roster.list(&holding)
+    }
+
     /// Whether a bundle hash belongs to a job (workers may only fetch those).
     pub fn knows_bundle(&self, hash: &str) -> bool {
         self.jobs.values().any(|j| j.bundle == hash)
@@ -665,6 +751,8 @@ fn entry_of(
         before: row.stats,
         batches_received: row.stats.batches_received,
         bytes_received: row.stats.bytes_received,
+        noise: Vec::new(),
+        noise_saved: 0,
     }
 }
 
@@ -702,6 +790,8 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
         }
         let mut entry = entry_of(row, render, settings.defines, None);
         entry.image_passes = image_passes;
+        entry.noise = store.load_noise(row.id).map_err(|e| e.to_string())?;
+        entry.noise_saved = entry.noise.len();
         return Ok(Restored {
             entry,
             done: vec![(0, image_passes.min(row.total))],
@@ -710,27 +800,31 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
         });
     }
     let layout = store.layout().clone();
-    let prefix = layout
+    let stored = layout
         .load_prefix(row.id, row.width, row.height)
         .map_err(|e| format!("its summed passes are damaged: {e}"))?;
+    let prefix = stored.sum;
     if (prefix.width, prefix.height) != (row.width, row.height) {
         return Err(format!(
             "its stored sum is {}x{}, not {}x{}",
             prefix.width, prefix.height, row.width, row.height
         ));
     }
-    let mut acc = Accumulator::new(prefix, row.window);
+    let mut acc = Accumulator::new(prefix, stored.odd, row.window);
     let mut done = vec![(0, acc.prefix_passes())];
+    let mut noise = store.load_noise(row.id).map_err(|e| e.to_string())?;
+    let noise_saved = noise.len();
+    let last_saved = noise.last().map_or(0, |l| l.0);
     let ranges = store.batch_ranges(row.id).map_err(|e| e.to_string())?;
     for (start, end) in ranges {
         // A damaged batch is dropped: its passes are simply rendered again.
         let added = layout
             .load_batch(row.id, start, end)
-            .and_then(|sum| {
-                acc.add(start, sum)
+            .and_then(|r| {
+                acc.add(start, r.sum, r.odd)
                     .map_err(|e| StoreError::Corrupt(format!("batch {start}..{end}"), e.to_string()))
             })
-            .map(|_| ());
+            .map(|merged| noise.extend(merged.noise.into_iter().filter(|p| p.0 > last_saved)));
         match added {
             Ok(()) => done.push((start, end)),
             Err(e) => {
@@ -748,7 +842,7 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
     if acc.prefix_passes() >= row.total {
         // Every pass was stored but the coordinator stopped before finishing the job.
         layout
-            .write_prefix(row.id, acc.prefix())
+            .write_prefix(row.id, acc.prefix(), acc.odd())
             .and_then(|_| layout.write_images(row.id, acc.prefix()))
             .map_err(|e| e.to_string())?;
         store
@@ -761,6 +855,8 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
     let sum = (!state.is_final()).then(|| Arc::new(Mutex::new(acc)));
     let mut entry = entry_of(row, render, settings.defines, sum);
     entry.image_passes = image_passes;
+    entry.noise = noise;
+    entry.noise_saved = noise_saved;
     Ok(Restored {
         entry,
         done,
@@ -797,7 +893,7 @@ mod tests {
             passes: Some(1),
             ..JobSettings::default()
         };
-        let empty = || Accumulator::new(FilmSum::new(4, 4), 1);
+        let empty = || Accumulator::empty(4, 4, 1);
         let done = farm
             .create_job(&settings, render(), 1, "s.xml", "h", empty())
             .unwrap();
@@ -824,9 +920,9 @@ mod tests {
         let mut part = FilmSum::new(4, 4);
         part.passes = 1;
         let mut acc = c.sum.lock().unwrap();
-        acc.add(0, part).unwrap();
+        acc.add(0, part, None).unwrap();
         let layout = farm.layout();
-        layout.write_prefix(done, acc.prefix()).unwrap();
+        layout.write_prefix(done, acc.prefix(), acc.odd()).unwrap();
         layout.write_images(done, acc.prefix()).unwrap();
         drop(acc);
         assert_eq!(

@@ -20,3 +20,5 @@ pub mod scheduler;
 pub mod serve_command;
 pub mod service;
 pub mod store;
+pub mod web;
+pub mod workers;

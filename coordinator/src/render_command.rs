@@ -129,7 +129,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         );
     }
     scheduler.add_job(0, total, window, done, &[(0, done)], JobState::Queued);
-    let mut acc = Accumulator::new(prefix, window);
+    // A local render follows no noise estimate (no odd-pass sample).
+    let mut acc = Accumulator::new(prefix, None, window);
     let save_every = Duration::from_secs_f64(save_every);
     let mut saved = Instant::now();
     let mut save_error = None;
@@ -152,7 +153,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             .unwrap_or_default();
         let sum = pool.install(|| render_batch(&scene, &resolved.render, grant.start..grant.end, &radii));
         scheduler.complete(grant.lease_id, now())?;
-        let (checkpoints, _) = acc.add(grant.start, sum)?;
+        let checkpoints = acc.add(grant.start, sum, None)?.checkpoints;
         if (saved.elapsed() >= save_every || !checkpoints.is_empty()) && save_error.is_none() {
             // Keep rendering if this fails: the image may still be written.
             if let Err(e) = resume::save(&sums_path, &fingerprint, acc.prefix()) {

@@ -453,6 +453,34 @@ impl Scheduler {
         self.jobs.get(&job_id).map(|j| j.next_start)
     }
 
+    /// The worker holding a live lease.
+    pub fn lease_worker(&self, lease_id: u64) -> Option<&str> {
+        self.leases.get(&lease_id).map(|l| l.worker.as_str())
+    }
+
+    /// Every live lease: its worker and its range.
+    pub fn holdings(&self) -> Vec<(String, Grant)> {
+        self.leases
+            .iter()
+            .map(|(&lease_id, l)| {
+                (
+                    l.worker.clone(),
+                    Grant {
+                        lease_id,
+                        job_id: l.job,
+                        start: l.start,
+                        end: l.end,
+                    },
+                )
+            })
+            .collect()
+    }
+
+    /// A worker's speed on a job, in passes per second, from its latest finished batch.
+    pub fn worker_rate(&self, job_id: u64, worker: &str) -> Option<f64> {
+        Some(self.jobs.get(&job_id)?.rates.get(worker)? * 1000.0)
+    }
+
     /// Workers holding leases on a job.
     pub fn workers_on(&self, job_id: u64) -> Vec<String> {
         let mut w: Vec<String> = self

@@ -7,7 +7,8 @@
 //! ```text
 //! photonfarm.sqlite           jobs, completed batches not yet merged, the lease id base
 //! bundles/HASH.tar, HASH/     job bundles, content-addressed, and their unpacked files
-//! jobs/ID/prefix.bin          passes [0, N) summed (the accumulator's prefix)
+//! jobs/ID/prefix.bin          passes [0, N) summed (the accumulator's prefix), with its odd
+//!                             passes on the sampled pixels (photonfarm::parity)
 //! jobs/ID/batch-S-E.bin       results of passes [S, E) not yet merged into the prefix
 //! jobs/ID/image.exr, .png     the latest checkpoint
 //! ```
@@ -20,7 +21,8 @@
 use std::path::{Path, PathBuf};
 
 use photonfarm::film::FilmSum;
-use photonfarm::protocol::{decode_batch, encode_batch};
+use photonfarm::parity::OddSums;
+use photonfarm::protocol::{BatchResult, decode_result, encode_batch, encode_result};
 use rusqlite::{Connection, OptionalExtension, params};
 
 use crate::scheduler::JobState;
@@ -190,9 +192,14 @@ impl Layout {
         write_durably_as(&self.batch_path(job, start, end), encoded, tag)
     }
 
-    /// Stores a job's prefix (passes [0, N) summed) durably.
-    pub fn write_prefix(&self, job: u64, prefix: &FilmSum) -> Result<(), StoreError> {
-        write_durably(&self.job_dir(job).join("prefix.bin"), &encode_batch(prefix))
+    /// Stores a job's prefix (passes [0, N) summed) durably, with its odd passes' sample if
+    /// known (one file, so the two always agree).
+    pub fn write_prefix(&self, job: u64, prefix: &FilmSum, odd: Option<&OddSums>) -> Result<(), StoreError> {
+        let bytes = match odd {
+            Some(odd) => encode_result(prefix, odd),
+            None => encode_batch(prefix),
+        };
+        write_durably(&self.job_dir(job).join("prefix.bin"), &bytes)
     }
 
     /// Writes the checkpoint images (EXR and PNG) atomically.
@@ -209,22 +216,26 @@ impl Layout {
         Ok(())
     }
 
-    /// The stored prefix, or an empty one.
-    pub fn load_prefix(&self, job: u64, width: u32, height: u32) -> Result<FilmSum, StoreError> {
+    /// The stored prefix and its odd passes' sample (None if it was stored without one), or
+    /// an empty prefix.
+    pub fn load_prefix(&self, job: u64, width: u32, height: u32) -> Result<BatchResult, StoreError> {
         let path = self.job_dir(job).join("prefix.bin");
         match std::fs::read(&path) {
-            Ok(bytes) => decode_batch(&bytes)
+            Ok(bytes) => decode_result(&bytes)
                 .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string())),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(FilmSum::new(width, height)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(BatchResult {
+                sum: FilmSum::new(width, height),
+                odd: Some(OddSums::empty(width, height)),
+            }),
             Err(e) => Err(StoreError::Io(path.display().to_string(), e)),
         }
     }
 
-    /// Reads one stored batch result.
-    pub fn load_batch(&self, job: u64, start: u64, end: u64) -> Result<FilmSum, StoreError> {
+    /// Reads one stored batch result, as the worker sent it.
+    pub fn load_batch(&self, job: u64, start: u64, end: u64) -> Result<BatchResult, StoreError> {
         let path = self.batch_path(job, start, end);
         let bytes = std::fs::read(&path).map_err(io(&path))?;
-        decode_batch(&bytes).map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))
+        decode_result(&bytes).map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))
     }
 }
 
@@ -248,7 +259,10 @@ impl Store {
                  PRIMARY KEY (job, start));
              CREATE TABLE IF NOT EXISTS leases (
                  id INTEGER PRIMARY KEY, job INTEGER NOT NULL, start INTEGER NOT NULL,
-                 end INTEGER NOT NULL, worker TEXT NOT NULL, key TEXT NOT NULL);",
+                 end INTEGER NOT NULL, worker TEXT NOT NULL, key TEXT NOT NULL);
+             CREATE TABLE IF NOT EXISTS noise (
+                 job INTEGER NOT NULL, passes INTEGER NOT NULL, variance REAL NOT NULL,
+                 PRIMARY KEY (job, passes));",
         )?;
         // Columns added after the first release (an error means the column is there already):
         // passes in each job's latest image, and its counters.
@@ -485,6 +499,32 @@ impl Store {
         )?;
         let _ = std::fs::remove_file(self.layout.batch_path(job, start, end));
         Ok(())
+    }
+
+    /// Stores noise estimates (passes, variance) of a job, in one transaction.
+    pub fn save_noise(&mut self, job: u64, points: &[(u64, f64)]) -> Result<(), StoreError> {
+        let tx = self.db.transaction()?;
+        for &(passes, v) in points {
+            tx.execute(
+                "INSERT OR REPLACE INTO noise (job, passes, variance) VALUES (?1, ?2, ?3)",
+                params![job as i64, passes as i64, v],
+            )?;
+        }
+        tx.commit()?;
+        Ok(())
+    }
+
+    /// A job's stored noise estimates, by passes.
+    pub fn load_noise(&self, job: u64) -> Result<Vec<(u64, f64)>, StoreError> {
+        let mut stmt = self
+            .db
+            .prepare("SELECT passes, variance FROM noise WHERE job = ?1 ORDER BY passes")?;
+        let points = stmt
+            .query_map(params![job as i64], |r| {
+                Ok((r.get::<_, i64>(0)? as u64, r.get::<_, f64>(1)?))
+            })?
+            .collect::<Result<_, _>>()?;
+        Ok(points)
     }
 
     /// Forgets the batches a stored prefix of `passes` passes contains.

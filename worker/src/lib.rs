@@ -20,7 +20,8 @@ use anyhow::{Context, bail};
 use photonfarm::bundle::UnpackLimits;
 use photonfarm::film::FilmSum;
 use photonfarm::limits::Limits;
-use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encode_batch};
+use photonfarm::parity::OddSums;
+use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encode_result};
 use photonfarm::render::render_batch;
 use photonfarm::scene::Scene;
 use tokio::sync::watch;
@@ -319,8 +320,10 @@ async fn work_on(
     let sum = tokio::task::spawn_blocking(move || {
         pool.install(|| {
             // Pass by pass, so a lost lease stops the work early; the sum is the same bytes as
-            // one call over the whole range.
+            // one call over the whole range. The odd passes are also summed on the sampled
+            // pixels, for the coordinator's noise estimate (photonfarm::parity).
             let mut sum = FilmSum::new(scene.width(), scene.height());
+            let mut odd = OddSums::empty(scene.width(), scene.height());
             for (k, pass) in (lease_r.start..lease_r.end).enumerate() {
                 if lost_r.load(Ordering::Relaxed) {
                     return None;
@@ -332,14 +335,17 @@ async fn work_on(
                 };
                 let part = render_batch(&scene, &lease_r.settings, pass..pass + 1, radii);
                 sum.add(&part).expect("same scene, same size");
+                if pass % 2 == 1 {
+                    odd.add(&OddSums::of(&part));
+                }
             }
-            Some(sum)
+            Some((sum, odd))
         })
     })
     .await
     .context("the render thread failed")?;
     heartbeat.abort();
-    let Some(sum) = sum else {
+    let Some((sum, odd)) = sum else {
         tracing::warn!(
             lease = lease.lease_id,
             "lease lost (expired or job cancelled); batch dropped"
@@ -353,7 +359,7 @@ async fn work_on(
         start: lease.start,
         end: lease.end,
     };
-    outbox.put(&parcel, &encode_batch(&sum))?;
+    outbox.put(&parcel, &encode_result(&sum, &odd))?;
     Ok(Some(parcel))
 }
 
