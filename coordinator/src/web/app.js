@@ -19,9 +19,11 @@ function h(tag, attrs, ...children) {
   for (const [k, v] of Object.entries(attrs || {})) {
     if (v === null || v === undefined || v === false) continue;
     if (k.startsWith('on')) el.addEventListener(k.slice(2), v);
+    // Through the CSSOM: the page's CSP refuses style attributes.
+    else if (k === 'style') el.style.cssText = v;
     else el.setAttribute(k, v === true ? '' : String(v));
   }
-  for (const c of children.flat()) {
+  for (const c of children.flat(Infinity)) {
     if (c !== null && c !== undefined) el.append(c instanceof Node ? c : document.createTextNode(String(c)));
   }
   return el;
@@ -113,11 +115,11 @@ const views = {
       root.replaceChildren(state.title,
         h('div', { class: 'cards' },
           h('div', { class: 'card' }, h('h3', null, 'Latest checkpoint'), state.imageBox),
-          h('div', { class: 'card' }, h('h3', null, 'Status'), state.details, state.cancel, state.error)),
-        h('div', { class: 'card', style: 'margin-top:1rem' },
-          h('h3', null, 'Convergence (no reference needed)'), state.chart,
-          h('p', { class: 'hint' }, 'Estimated variance of the image (its expected mean squared error against the ',
-            'converged image), from the difference of its even and odd passes; the dashed line falls as 1/passes.')));
+          h('div', { class: 'stack' },
+            h('div', { class: 'card' }, h('h3', null, 'Status'), state.details, state.cancel, state.error),
+            h('div', { class: 'card' }, h('h3', null, 'Convergence, without a reference'), state.chart,
+              h('p', { class: 'hint' }, 'Estimated variance of the image (its expected squared error against the ',
+                'converged image) from the difference of its even and odd passes. Dashed: falling as 1/passes.')))));
     }
     state.title.replaceChildren('Job ' + j.id + ' ', stateTag(j.state));
     const rows = [
@@ -146,16 +148,23 @@ const views = {
   /** The workers seen lately. */
   async workers(root) {
     const { workers } = await api('/api/workers');
-    root.replaceChildren(h('h2', null, 'Workers'), workers.length ? h('table', { id: 'workers' },
-      h('thead', null, h('tr', null, h('th', null, 'Name'), h('th', { class: 'num' }, 'Threads'),
-        h('th', null, 'Current lease'), h('th', { class: 'num' }, 'Passes/s'), h('th', { class: 'num' }, 'Passes done'),
-        h('th', { class: 'num' }, 'Last seen'))),
-      h('tbody', null, workers.map((w) => h('tr', null, h('td', null, w.name), h('td', { class: 'num' }, w.threads),
-        h('td', null, w.leases.length ? w.leases.map((l, i) => [i ? ', ' : '',
-          h('a', { href: '#/jobs/' + l.job }, 'job ' + l.job), ' passes ' + l.start + '–' + (l.end - 1)]) : h('span', { class: 'muted' }, 'idle')),
-        h('td', { class: 'num' }, w.rate > 0 ? w.rate.toFixed(2) : '—'), h('td', { class: 'num' }, w.passes),
-        h('td', { class: 'num' }, fmtDuration(w.last_seen_seconds) + ' ago'))))))
-      : h('p', { class: 'muted' }, 'No worker has asked for work lately.'));
+    if (!workers.length) {
+      root.replaceChildren(h('h2', null, 'Workers'), h('p', { class: 'muted' }, 'No worker has asked for work lately.'));
+      return;
+    }
+    const lease = (w) => w.leases.length
+      ? w.leases.map((l, i) => [i ? ', ' : '', h('a', { href: '#/jobs/' + l.job }, 'job ' + l.job),
+        ' passes ' + l.start + '–' + (l.end - 1)])
+      : h('span', { class: 'muted' }, 'idle');
+    const row = (w) => h('tr', null,
+      h('td', null, w.name), h('td', { class: 'num' }, w.threads), h('td', null, lease(w)),
+      h('td', { class: 'num' }, w.rate > 0 ? w.rate.toFixed(2) : '—'), h('td', { class: 'num' }, w.passes),
+      h('td', { class: 'num' }, fmtDuration(w.last_seen_seconds) + ' ago'));
+    const head = h('tr', null, h('th', null, 'Name'), h('th', { class: 'num' }, 'Threads'),
+      h('th', null, 'Current lease'), h('th', { class: 'num' }, 'Passes/s'), h('th', { class: 'num' }, 'Passes done'),
+      h('th', { class: 'num' }, 'Last seen'));
+    root.replaceChildren(h('h2', null, 'Workers'),
+      h('table', { id: 'workers' }, h('thead', null, head), h('tbody', null, workers.map(row))));
   },
 
   /** Submitting a bundle, as `coordinator submit` does. */
@@ -209,7 +218,7 @@ function chart(noise) {
     return h('p', { class: 'muted', id: 'no-noise' },
       noise.tracking ? 'No estimate yet: it needs an even and an odd pass.' : 'No estimate: a worker sent results without their odd passes.');
   }
-  const W = 640, H = 280, L = 64, R = 16, T = 12, B = 40;
+  const W = 540, H = 250, L = 58, R = 12, T = 10, B = 36;
   const lx = (v) => Math.log10(v);
   let [x0, x1] = [lx(pts[0].passes), lx(pts[pts.length - 1].passes)];
   let ys = pts.map((p) => lx(p.variance));
