@@ -180,14 +180,15 @@ mod tests {
     fn one_pass_results_estimate_noise_by_their_parity() {
         let mut a = Accumulator::empty(1, 1, 2);
         let mut points = Vec::new();
-        // Even passes are 1, odd ones 3: the halves' means differ by 2, so the estimate is
-        // 2² · We·Wo / W²: 1 with equal halves, 8/9 with two even passes and one odd.
+        // Even passes are 1, odd ones 3 (in one channel of three): the halves' means differ
+        // by 2, so the estimate is 2² · We·Wo / W² / 3: 1/3 with equal halves, 8/27 with two
+        // even passes and one odd.
         for pass in [1u64, 0, 3, 2] {
             let v = if pass % 2 == 0 { 1 } else { 3 };
             points.extend(a.add(pass, part(v << 24, 1), None).unwrap().noise);
         }
         assert_eq!(a.odd().unwrap().passes, 2);
-        let want = [(2, 1.0), (3, 8.0 / 9.0), (4, 1.0)];
+        let want = [(2, 1.0 / 3.0), (3, 8.0 / 27.0), (4, 1.0 / 3.0)];
         assert_eq!(points.len(), want.len(), "{points:?}");
         for (got, want) in points.iter().zip(want) {
             assert_eq!(got.0, want.0);

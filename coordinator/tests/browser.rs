@@ -47,7 +47,8 @@ fn chromedriver() -> (Proc, String) {
     (Proc(child), format!("http://127.0.0.1:{port}"))
 }
 
-async fn browser(webdriver: &str) -> Client {
+/// A Chromium session with a fresh profile in `profile`.
+async fn browser(webdriver: &str, profile: &Path) -> Client {
     let mut args = vec![
         "--headless",
         "--no-sandbox",
@@ -64,7 +65,6 @@ async fn browser(webdriver: &str) -> Client {
     .into_iter()
     .map(String::from)
     .collect::<Vec<_>>();
-    let profile = tempfile::tempdir().unwrap().keep();
     args.push(format!("--user-data-dir={}", profile.display()));
     let mut options = json!({ "args": args });
     if Path::new("/usr/bin/chromium").exists() {
@@ -180,7 +180,8 @@ async fn web_page_in_headless_chromium() {
     let _w1 = worker_with_env(&url, "render-a", dir.path(), &env);
     let _w2 = worker_with_env(&url, "render-b", dir.path(), &env);
 
-    let c = browser(&webdriver).await;
+    let profile = tempfile::tempdir().unwrap();
+    let c = browser(&webdriver, profile.path()).await;
 
     // Without the token: the login form, and no data anywhere on the page.
     c.goto(&format!("{url}/")).await.unwrap();

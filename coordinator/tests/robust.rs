@@ -191,8 +191,9 @@ async fn every_size_is_admitted_or_refused_with_a_4xx_and_the_coordinator_surviv
             &result,
             WORKER_TOKEN,
             key,
-            // Small enough to be sent whole before the early answer (the limit is 1965 B).
-            vec![0; 4 << 10],
+            // Small enough to be sent whole before the early answer (the limit of an 8×8
+            // image's result, its odd-pass sample included, is 5,201 B).
+            vec![0; 8 << 10],
         )
         .await,
         StatusCode::PAYLOAD_TOO_LARGE,
