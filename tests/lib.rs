@@ -135,6 +135,12 @@ fn reference_meta(name: &str) -> serde_json::Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// The reference's own remaining noise (`noise_floor_mse` in `refs/NAME.json`, NAME without
+/// extension): an MSE against it is the render's MSE against the truth plus this.
+pub fn noise_floor(name: &str) -> f64 {
+    reference_meta(name)["noise_floor_mse"].as_f64().unwrap()
+}
+
 /// The reference's recorded Mitsuba MSE at the test's spp: (spp, median MSE over seeds).
 pub fn mitsuba_mse(name: &str) -> (u64, f64) {
     let meta = reference_meta(name);

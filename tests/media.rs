@@ -4,10 +4,11 @@
 
 use std::path::Path;
 
+use photonfarm::integrator::sppm::{SppmSettings, VolumeEstimate};
 use photonfarm::render::render_sppm_iterations;
 use photonfarm_tests::{
-    Comparison, channel_means, compare, load, reference, refs_dir, render_path, render_sppm, scenes_dir,
-    sppm_settings,
+    Comparison, channel_means, compare, load, noise_floor, reference, refs_dir, render_path, render_sppm,
+    scenes_dir, sppm_settings,
 };
 
 fn report(what: &str, c: &Comparison) {
@@ -43,27 +44,39 @@ fn fog_path_tracer_matches_mitsuba_volpath() {
     );
 }
 
+/// Both volume estimates of SPPM against Mitsuba: the beam radiance estimate (the default) and
+/// the point estimate. At equal iterations (the same photons) the beam's error above the
+/// reference's own noise is lower; equal-time figures are in docs/volumes.md.
 #[test]
 fn fog_sppm_matches_mitsuba_volpath() {
     let scene = load(&refs_dir().join("fog.xml"), &[("res", "64")]);
-    let settings = sppm_settings(&scene, 50_000);
     let reference = reference("fog.exr");
-    let few = compare(&render_sppm(&scene, settings, 4, 1).image().unwrap(), &reference);
-    let many = compare(&render_sppm(&scene, settings, 64, 1).image().unwrap(), &reference);
-    report("fog, SPPM 4 iterations", &few);
-    report("fog, SPPM 64 iterations", &many);
-    assert!(many.worst_mean_error() < 0.03, "{many:?}");
-    assert!(
-        many.mse < 0.5 * few.mse,
-        "error must fall: {:.3e} then {:.3e}",
-        few.mse,
-        many.mse
+    let floor = noise_floor("fog");
+    let mut excess = Vec::new();
+    for estimate in [VolumeEstimate::Beam, VolumeEstimate::Point] {
+        let settings = sppm_settings(&scene, 20_000).with_volume_estimate(estimate);
+        let few = compare(&render_sppm(&scene, settings, 4, 1).image().unwrap(), &reference);
+        let many = compare(&render_sppm(&scene, settings, 48, 1).image().unwrap(), &reference);
+        report(&format!("fog, SPPM {estimate:?}, 4 iterations"), &few);
+        report(&format!("fog, SPPM {estimate:?}, 48 iterations"), &many);
+        assert!(many.worst_mean_error() < 0.03, "{estimate:?}: {many:?}");
+        assert!(
+            many.mse - floor < 0.5 * (few.mse - floor),
+            "{estimate:?}: error must fall: {:.3e} then {:.3e}",
+            few.mse,
+            many.mse
+        );
+        excess.push(many.mse - floor);
+    }
+    eprintln!(
+        "fog, 48 iterations, MSE above the reference's floor: beam {:.3e}, point {:.3e}",
+        excess[0], excess[1]
     );
     assert!(
-        many.mae < 0.6 * few.mae,
-        "error must fall: {:.3e} then {:.3e}",
-        few.mae,
-        many.mae
+        excess[0] < 0.5 * excess[1],
+        "beam {:.3e}, point {:.3e}",
+        excess[0],
+        excess[1]
     );
 }
 
@@ -154,22 +167,116 @@ fn beam_through_glass_in_fog_makes_a_volumetric_caustic_with_sppm_only() {
     assert!(after_sppm > 3.0 * after_path, "SPPM should show the focused beam");
 }
 
-/// Volume photons keep the iteration contract: split renders add up to the same bytes.
+/// Volume photons keep the iteration contract with either estimate: split renders add up to the
+/// same bytes.
 #[test]
 fn split_and_merge_is_bit_exact_in_fog() {
     let scene = load(&refs_dir().join("fog.xml"), &[("res", "24")]);
-    let settings = sppm_settings(&scene, 3_000);
-    let radii = settings.radii(0..6);
-    let render = |threads: usize, a: u64, b: u64| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| render_sppm_iterations(&scene, 5, &settings, a..b, &radii[a as usize..b as usize]))
-    };
-    let whole = render(2, 0, 6);
-    let mut merged = render(1, 4, 6);
-    merged.add(&render(2, 0, 4)).unwrap();
-    assert_eq!(whole, merged);
-    assert!(whole.sums.iter().any(|s| s[0] > 0));
+    for estimate in [VolumeEstimate::Beam, VolumeEstimate::Point] {
+        let settings = sppm_settings(&scene, 3_000).with_volume_estimate(estimate);
+        let radii = settings.radii(0..6);
+        let render = |threads: usize, a: u64, b: u64| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                render_sppm_iterations(&scene, 5, &settings, a..b, &radii[a as usize..b as usize])
+            })
+        };
+        let whole = render(2, 0, 6);
+        let mut merged = render(1, 4, 6);
+        merged.add(&render(2, 0, 4)).unwrap();
+        assert_eq!(whole, merged, "{estimate:?}");
+        assert!(whole.sums.iter().any(|s| s[0] > 0));
+    }
+}
+
+/// Where each volume estimate struggles (docs/stability.md): a thin medium (the point estimate
+/// rarely collides), a light inside the medium (fog.xml's spot light), a dense medium and a
+/// medium seen through glass (the beam caustic). Each estimate renders with its defaults; its
+/// noise is the mean squared difference of two renders with different seeds, over two (its
+/// variance). The beam estimate must be the less noisy, and its channel means within 3% of an
+/// unbiased one: the path tracer's in fog, and through glass (which the path tracer cannot
+/// render) the point estimate's with the same radius, whose expectation the beam's equals by
+/// construction. In the dense medium few photons reach what the camera sees (the light is 10
+/// mean free paths away), so every pixel shares the same few photons and the means of both
+/// estimates move together by 20–30% from seed to seed: only the noise is compared there.
+#[test]
+fn volume_estimates_in_thin_dense_and_glass_seen_media() {
+    let fog = refs_dir().join("fog.xml");
+    let caustic = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/beam-caustic.xml");
+    // (name, scene, defines, iterations, whether the means are checked)
+    type Case<'a> = (&'a str, &'a Path, &'a [(&'a str, &'a str)], u64, bool);
+    let cases: [Case; 4] = [
+        (
+            "thin fog (density 0.05)",
+            &fog,
+            &[("res", "32"), ("density", "0.05")],
+            16,
+            true,
+        ),
+        ("fog (light inside)", &fog, &[("res", "32")], 16, true),
+        (
+            "dense fog (density 8)",
+            &fog,
+            &[("res", "32"), ("density", "8")],
+            16,
+            false,
+        ),
+        (
+            "beam through glass",
+            &caustic,
+            &[("width", "48"), ("height", "27")],
+            8,
+            true,
+        ),
+    ];
+    for (name, path, defines, iterations, check_means) in cases {
+        let scene = load(path, defines);
+        let render = |settings, seed| render_sppm(&scene, settings, iterations, seed).image().unwrap();
+        let mut noise = Vec::new();
+        let mut means = Vec::new();
+        for estimate in [VolumeEstimate::Beam, VolumeEstimate::Point] {
+            let settings = sppm_settings(&scene, 20_000).with_volume_estimate(estimate);
+            let (a, b) = (render(settings, 1), render(settings, 2));
+            noise.push(compare(&a, &b).mse / 2.0);
+            let (ma, mb) = (channel_means(&a), channel_means(&b));
+            means.push([0, 1, 2].map(|c| 0.5 * (ma[c] + mb[c])));
+        }
+        let unbiased = if path == fog.as_path() {
+            channel_means(&render_path(&scene, 8192, 3).image().unwrap())
+        } else {
+            let beam = sppm_settings(&scene, 20_000);
+            let point = SppmSettings {
+                volume_estimate: VolumeEstimate::Point,
+                ..beam
+            };
+            channel_means(&render(point, 3))
+        };
+        let error = |m: &[f64; 3]| {
+            (0..3)
+                .map(|c| (m[c] / unbiased[c] - 1.0).abs())
+                .fold(0.0, f64::max)
+        };
+        eprintln!(
+            "{name}: variance beam {:.3e}, point {:.3e} (ratio {:.1}); worst channel mean error beam {:.2}%, point {:.2}%",
+            noise[0],
+            noise[1],
+            noise[1] / noise[0],
+            100.0 * error(&means[0]),
+            100.0 * error(&means[1]),
+        );
+        assert!(
+            !check_means || error(&means[0]) < 0.03,
+            "{name}: beam means {:?} vs {unbiased:?}",
+            means[0]
+        );
+        assert!(
+            noise[0] < noise[1],
+            "{name}: beam {:.3e}, point {:.3e}",
+            noise[0],
+            noise[1]
+        );
+    }
 }

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use glam::Vec2;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use photonfarm::integrator::sppm::{self, GatherContext, PhotonMap, SppmSettings};
+use photonfarm::integrator::sppm::{self, GatherContext, PhotonMap, SppmSettings, VolumeMap};
 use photonfarm::render::{Method, RenderSettings, render_passes};
 use photonfarm::sampling::{Sampler, Stream};
 use photonfarm::scene::Scene;
@@ -50,7 +50,7 @@ fn main() {
 
     let photons = buffers.surface;
     let mut map = PhotonMap::new();
-    let volume_map = PhotonMap::new();
+    let volume_map = sppm::BeamMap::new();
     let (mut grid_build, mut kd_build) = (Vec::new(), Vec::new());
     let points: Vec<[f32; 3]> = photons.iter().map(|p| p.p).collect();
     let mut tree = None;
@@ -116,7 +116,7 @@ fn main() {
             scene: &scene,
             map: &map,
             radius,
-            volume_map: &volume_map,
+            volume_map: VolumeMap::Beam(&volume_map),
             volume_radius: radius,
             power_unit: sppm::power_unit(&scene, PHOTONS),
             k: settings.k,

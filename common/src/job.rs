@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::integrator::direct_illumination::DirectSettings;
 use crate::integrator::path::PathSettings;
-use crate::integrator::sppm::{SppmError, SppmSettings};
+use crate::integrator::sppm::{SppmError, SppmSettings, VolumeEstimate};
 use crate::render::{Method, RenderSettings};
 use crate::scene::Scene;
 
@@ -61,6 +61,9 @@ pub struct JobSettings {
     /// SPPM initial volume radius over the initial surface radius.
     #[serde(default)]
     pub volume_radius_ratio: Option<f32>,
+    /// SPPM volume estimator.
+    #[serde(default)]
+    pub volume_estimate: Option<VolumeEstimate>,
     /// `-D name=value` scene parameters.
     #[serde(default)]
     pub defines: Vec<(String, String)>,
@@ -163,6 +166,7 @@ impl JobSettings {
                     ("alpha", self.alpha.is_some()),
                     ("k", self.k.is_some()),
                     ("volume_radius_ratio", self.volume_radius_ratio.is_some()),
+                    ("volume_estimate", self.volume_estimate.is_some()),
                 ] {
                     if given {
                         return Err(JobError::NotForPath(name));
@@ -182,6 +186,18 @@ impl JobSettings {
                 s.initial_radius = self.radius.unwrap_or(s.initial_radius);
                 s.alpha = self.alpha.unwrap_or(s.alpha);
                 s.k = self.k.unwrap_or(s.k);
+                if let Some(e) = self.volume_estimate {
+                    let declared = scene.integrator.kind == "sppm"
+                        && scene
+                            .integrator
+                            .params
+                            .iter()
+                            .any(|(n, _)| n == "volume_radius_ratio");
+                    if !declared {
+                        s = s.with_volume_estimate(e);
+                    }
+                    s.volume_estimate = e;
+                }
                 s.volume_radius_ratio = self.volume_radius_ratio.unwrap_or(s.volume_radius_ratio);
                 s.validate()?;
                 let declared = scene

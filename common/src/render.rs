@@ -14,7 +14,9 @@ use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
 use crate::integrator::direct_illumination::{self, DirectSettings};
 use crate::integrator::path::{self, PathSettings};
-use crate::integrator::sppm::{self, GatherContext, PhotonBuffers, PhotonMap, SppmSettings};
+use crate::integrator::sppm::{
+    self, BeamMap, GatherContext, PhotonBuffers, PhotonMap, SppmSettings, VolumeEstimate, VolumeMap,
+};
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -92,16 +94,26 @@ pub fn render_sppm_iterations(
     // Reused across iterations: memory depends on the photon count, not on the iterations.
     let mut photons = PhotonBuffers::default();
     let mut map = PhotonMap::new();
-    let mut volume_map = PhotonMap::new();
+    let mut point_map = PhotonMap::new();
+    let mut beam_map = BeamMap::new();
     for (iteration, &[radius, volume_radius]) in iterations.zip(radii) {
         sppm::trace_photons(scene, seed, iteration, settings.photons, max_depth, &mut photons);
         map.build(&photons.surface, radius);
-        volume_map.build(&photons.volume, volume_radius);
+        let volume_map = match settings.volume_estimate {
+            VolumeEstimate::Beam => {
+                beam_map.build(&photons.volume, volume_radius);
+                VolumeMap::Beam(&beam_map)
+            }
+            VolumeEstimate::Point => {
+                point_map.build(&photons.volume, volume_radius);
+                VolumeMap::Point(&point_map)
+            }
+        };
         let ctx = GatherContext {
             scene,
             map: &map,
             radius,
-            volume_map: &volume_map,
+            volume_map,
             volume_radius,
             power_unit: sppm::power_unit(scene, settings.photons),
             k: settings.k,

@@ -112,6 +112,31 @@ pub fn square_to_uniform_triangle(u: Vec2) -> Vec2 {
     Vec2::new(1.0 - t, u.y * t)
 }
 
+/// Kulla and Fajardo's equiangular sampling of a distance t in [0, t_max) (t_max may be
+/// infinite) along a unit ray that passes at distance `h` from a point, nearest to it at
+/// t = `delta`: the density follows 1 / (h² + (t − delta)²), the point's inverse-square
+/// falloff, so that light from a point source in a medium has finite variance. Returns the
+/// distance and its density; None when the ray passes through the point (h = 0).
+pub fn sample_equiangular(delta: f32, h: f32, t_max: f32, u: f32) -> Option<(f32, f32)> {
+    // Written to refuse NaN too.
+    if h.is_nan() || h <= 1e-7 || t_max.is_nan() || t_max <= 0.0 {
+        return None;
+    }
+    let theta_a = (-delta / h).atan();
+    let theta_b = if t_max.is_finite() {
+        ((t_max - delta) / h).atan()
+    } else {
+        FRAC_PI_2
+    };
+    let span = theta_b - theta_a;
+    if span.is_nan() || span <= 0.0 {
+        return None;
+    }
+    let x = h * (theta_a + u * span).tan();
+    let t = (delta + x).clamp(0.0, t_max.next_down());
+    Some((t, h / (span * (h * h + x * x))))
+}
+
 /// A discrete distribution, sampled by inverting its cumulative sum.
 #[derive(Clone, Debug, Default)]
 pub struct Distribution1D {
@@ -179,6 +204,42 @@ impl Distribution1D {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn equiangular_distances_are_sampled_by_their_density() {
+        // E[g(t) / pdf(t)] = ∫₀^T g: with g = 1 the segment's length, and with g = e^{−t} its
+        // integral, for a point beside, ahead of and behind the segment.
+        let mut s = Sampler::new(9, Stream::Photon, 0, 0);
+        for (delta, h, t_max) in [
+            (1.0f32, 0.2f32, 3.0f32),
+            (-0.5, 0.05, 2.0),
+            (5.0, 1.0, 2.0),
+            (0.5, 0.3, f32::INFINITY),
+        ] {
+            let n = 400_000;
+            let (mut len, mut expo) = (0.0f64, 0.0f64);
+            for _ in 0..n {
+                let (t, pdf) = sample_equiangular(delta, h, t_max, s.next_1d()).unwrap();
+                assert!((0.0..t_max).contains(&t));
+                len += 1.0 / pdf as f64;
+                expo += (-t as f64).exp() / pdf as f64;
+            }
+            let expect_expo = 1.0 - (-t_max as f64).exp();
+            assert!(
+                (expo / n as f64 / expect_expo - 1.0).abs() < 0.01,
+                "{delta} {h} {t_max}: {}",
+                expo / n as f64
+            );
+            if t_max.is_finite() {
+                assert!(
+                    (len / n as f64 / t_max as f64 - 1.0).abs() < 0.01,
+                    "{delta} {h}: {}",
+                    len / n as f64
+                );
+            }
+        }
+        assert!(sample_equiangular(1.0, 0.0, 2.0, 0.5).is_none());
+    }
 
     #[test]
     fn streams_depend_on_every_key_part_only() {

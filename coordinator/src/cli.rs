@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use photonfarm::integrator::sppm::VolumeEstimate;
 use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
 
 /// Photonfarm: a physically based renderer for Mitsuba 3 XML scenes (path tracing and
@@ -146,7 +147,8 @@ pub struct ConvergeArgs {
     /// Reference image (EXR) of the same resolution.
     #[arg(long)]
     pub reference: PathBuf,
-    /// Methods to compare, comma-separated: path, sppm.
+    /// Methods to compare, comma-separated: path, sppm (its default volume estimate), sppm-beam,
+    /// sppm-point (SPPM with that volume estimate).
     #[arg(long, default_value = "path,sppm")]
     pub methods: String,
     /// Render time per line, seconds.
@@ -193,6 +195,25 @@ pub enum Integrator {
     Sppm,
 }
 
+/// SPPM's volume estimator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum VolumeEstimateArg {
+    /// Every photon sphere along the camera ray (the beam radiance estimate).
+    Beam,
+    /// The photons around one sampled collision.
+    Point,
+}
+
+impl VolumeEstimateArg {
+    /// The renderer's setting.
+    pub fn estimate(self) -> VolumeEstimate {
+        match self {
+            VolumeEstimateArg::Beam => VolumeEstimate::Beam,
+            VolumeEstimateArg::Point => VolumeEstimate::Point,
+        }
+    }
+}
+
 /// What to render: shared by `render` and `submit`.
 #[derive(Debug, clap::Args)]
 pub struct JobArgs {
@@ -226,9 +247,14 @@ pub struct JobArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub k: Option<f32>,
     /// SPPM: initial volume radius over the initial surface radius [default: the scene's
-    /// volume_radius_ratio, else 2].
+    /// volume_radius_ratio, else 0.5 with --volume-estimate beam and 2 with point].
     #[arg(long, allow_negative_numbers = true)]
     pub volume_radius_ratio: Option<f32>,
+    /// SPPM: how light scattered in media is estimated from the volume photons: `beam` along
+    /// the whole camera ray (Jarosz et al.'s beam radiance estimate), or `point` at one sampled
+    /// collision [default: beam]. See docs/volumes.md.
+    #[arg(long, value_enum)]
+    pub volume_estimate: Option<VolumeEstimateArg>,
     /// Seed of every random number: the same seed gives the same image bytes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -269,6 +295,7 @@ impl JobArgs {
                 ("--alpha", self.alpha.is_some()),
                 ("--k", self.k.is_some()),
                 ("--volume-radius-ratio", self.volume_radius_ratio.is_some()),
+                ("--volume-estimate", self.volume_estimate.is_some()),
             ] {
                 if given {
                     anyhow::bail!("{flag} applies to --integrator sppm");
@@ -283,6 +310,7 @@ impl JobArgs {
             alpha: self.alpha,
             k: self.k,
             volume_radius_ratio: self.volume_radius_ratio,
+            volume_estimate: self.volume_estimate.map(VolumeEstimateArg::estimate),
             defines: self.define.clone(),
             seed: self.seed,
             checkpoint_every: self.checkpoint_every,

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use photonfarm::color::Rgb;
 use photonfarm::film::{FilmSum, read_image};
+use photonfarm::integrator::sppm::VolumeEstimate;
 use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
 use photonfarm::render::{RenderSettings, render_passes};
 use photonfarm::scene::Scene;
@@ -142,7 +143,12 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                     ..base.clone()
                 },
             )),
-            "sppm" => {
+            "sppm" | "sppm-beam" | "sppm-point" => {
+                let volume_estimate = match m {
+                    "sppm-beam" => Some(VolumeEstimate::Beam),
+                    "sppm-point" => Some(VolumeEstimate::Point),
+                    _ => None,
+                };
                 let alphas: Vec<Option<f64>> = if args.alpha.is_empty() {
                     vec![None]
                 } else {
@@ -155,7 +161,7 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                 };
                 for alpha in &alphas {
                     for radius in &radii {
-                        let mut name = "sppm".to_string();
+                        let mut name = m.to_string();
                         if alphas.len() > 1 {
                             name.push_str(&format!(" alpha={}", alpha.unwrap_or_default()));
                         }
@@ -168,13 +174,14 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                                 integrator: Some(JobIntegrator::Sppm),
                                 alpha: *alpha,
                                 radius: *radius,
+                                volume_estimate,
                                 ..base.clone()
                             },
                         ));
                     }
                 }
             }
-            other => bail!("unknown method \"{other}\" in --methods (path, sppm)"),
+            other => bail!("unknown method \"{other}\" in --methods (path, sppm, sppm-beam, sppm-point)"),
         }
     }
     Ok(lines)

@@ -9,7 +9,7 @@ use super::mis_weight;
 use super::walk::Hit;
 use crate::color::Rgb;
 use crate::geometry::SurfacePoint;
-use crate::light::Light;
+use crate::light::{Light, LightSample};
 use crate::scene::Scene;
 
 /// Where a path's previous bounce was and how it was sampled.
@@ -91,7 +91,21 @@ pub fn light_sample_in_medium(
     u: Vec2,
     phase_share: f32,
 ) -> Rgb {
-    let Some((_, ls)) = scene.sample_light(p, u_select, u) else {
+    let sample = scene.sample_light(p, u_select, u);
+    light_in_medium(scene, p, d, medium, sample, phase_share)
+}
+
+/// [`light_sample_in_medium`] for a light sample already drawn (from
+/// [`Scene::sample_light`] or [`Scene::sample_picked_light`]).
+pub fn light_in_medium(
+    scene: &Scene,
+    p: Vec3A,
+    d: Vec3A,
+    medium: u32,
+    sample: Option<(u32, LightSample)>,
+    phase_share: f32,
+) -> Rgb {
+    let Some((_, ls)) = sample else {
         return Rgb::ZERO;
     };
     let phase = scene.media[medium as usize].phase.eval(d, ls.wi);

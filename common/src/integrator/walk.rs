@@ -112,20 +112,52 @@ impl Walk {
     /// random numbers), then the surface, crossing null surfaces (medium boundaries) without a
     /// bounce. A flight that passes through its medium has its weight applied here.
     pub fn next_event<'s>(&mut self, scene: &'s Scene, sampler: &mut Sampler) -> Event<'s> {
+        self.advance(scene, |walk, m, t_surface| {
+            let med = &scene.media[m as usize];
+            match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
+                Flight::Collision { t, weight } => Some(Event::Medium {
+                    p: walk.ray.at(t),
+                    medium: m,
+                    weight,
+                }),
+                Flight::Passed { weight } => {
+                    walk.beta *= weight;
+                    None
+                }
+            }
+        })
+    }
+
+    /// Follows the ray to the next surface that scatters without sampling collisions in media:
+    /// `segment(walk, medium, t)` is called for every stretch of medium the ray crosses, from
+    /// the ray's origin to `t` (a surface, or infinity), and returns the throughput's factor
+    /// over the stretch (its transmittance, or an unbiased estimate of it); zero ends the walk.
+    /// For estimators that integrate along the ray (the beam radiance estimate) instead of at
+    /// one sampled point; never returns [`Event::Medium`].
+    pub fn next_surface<'s>(
+        &mut self,
+        scene: &'s Scene,
+        mut segment: impl FnMut(&Walk, u32, f32) -> Rgb,
+    ) -> Event<'s> {
+        self.advance(scene, |walk, m, t_surface| {
+            walk.beta *= segment(walk, m, t_surface);
+            (walk.beta == Rgb::ZERO).then_some(Event::Gone)
+        })
+    }
+
+    /// The walk to the next surface, crossing null surfaces; `in_medium(walk, medium, t)` decides
+    /// what happens on each stretch of medium up to `t` (an event ends the walk there).
+    fn advance<'s>(
+        &mut self,
+        scene: &'s Scene,
+        mut in_medium: impl FnMut(&mut Walk, u32, f32) -> Option<Event<'s>>,
+    ) -> Event<'s> {
         loop {
             let hit = scene.intersect(&self.ray);
             if let Some(m) = self.medium {
                 let t_surface = hit.as_ref().map_or(f32::INFINITY, |(h, _)| h.t);
-                let med = &scene.media[m as usize];
-                match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
-                    Flight::Collision { t, weight } => {
-                        return Event::Medium {
-                            p: self.ray.at(t),
-                            medium: m,
-                            weight,
-                        };
-                    }
-                    Flight::Passed { weight } => self.beta *= weight,
+                if let Some(event) = in_medium(self, m, t_surface) {
+                    return event;
                 }
             }
             let Some((_, sp)) = hit else {

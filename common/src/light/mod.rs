@@ -77,6 +77,16 @@ pub enum Light {
 }
 
 impl Light {
+    /// Where a light that is a point (point and spot lights) is: where light in a medium
+    /// around it concentrates as 1/distance², which equiangular sampling follows.
+    pub fn point_position(&self) -> Option<Vec3A> {
+        match self {
+            Light::Point(l) => Some(l.position),
+            Light::Spot(l) => Some(l.position),
+            _ => None,
+        }
+    }
+
     /// Samples a point on the light as seen from `p`.
     pub fn sample_li(
         &self,

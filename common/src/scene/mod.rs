@@ -238,13 +238,31 @@ impl Scene {
 
     /// Picks a light by power and samples it from `p`; the pdf includes the choice.
     pub fn sample_light(&self, p: Vec3A, u_select: f32, u: glam::Vec2) -> Option<(u32, LightSample)> {
+        let (i, pmf) = self.pick_light(u_select)?;
+        self.sample_picked_light(i, pmf, p, u)
+    }
+
+    /// Picks a light by power, as [`Scene::sample_light`] does: its index and probability. For
+    /// callers that choose where to sample it from after knowing which light it is.
+    pub fn pick_light(&self, u_select: f32) -> Option<(u32, f32)> {
         if self.light_sampling.is_empty() {
             return None;
         }
         let (i, pmf, _) = self.light_sampling.sample(u_select);
-        let mut ls = self.lights[i].sample_li(p, self.bvh.primitives(), u)?;
+        Some((i as u32, pmf))
+    }
+
+    /// Samples light `i`, picked with probability `pmf`, from `p`; the pdf includes the choice.
+    pub fn sample_picked_light(
+        &self,
+        i: u32,
+        pmf: f32,
+        p: Vec3A,
+        u: glam::Vec2,
+    ) -> Option<(u32, LightSample)> {
+        let mut ls = self.lights[i as usize].sample_li(p, self.bvh.primitives(), u)?;
         ls.pdf *= pmf;
-        Some((i as u32, ls))
+        Some((i, ls))
     }
 
     /// Radiance that a ray leaving the scene along `d` finds, and the density with which

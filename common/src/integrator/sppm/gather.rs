@@ -1,6 +1,8 @@
 //! The camera pass: one jittered path per pixel through specular and glossy bounces to the first
 //! surface with a diffuse part, where direct light is sampled and the photons within the
-//! iteration's radius estimate the rest.
+//! iteration's radius estimate the rest. In media, the volume photons estimate the light
+//! scattered towards the camera: along the whole ray (the beam radiance estimate) or at one
+//! sampled collision (the point estimate).
 //!
 //! Specular bounces are followed as photons are. Glossy-only surfaces (rough metals) are
 //! followed by BSDF sampling, with light sampling and multiple importance sampling as in the
@@ -10,13 +12,14 @@ use std::f32::consts::PI;
 
 use glam::Vec3A;
 
+use super::beam_map::BeamMap;
 use super::photon_map::PhotonMap;
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::geometry::Ray;
 use crate::integrator::direct;
 use crate::integrator::walk::{Event, Hit, Walk};
-use crate::sampling::Sampler;
+use crate::sampling::{Sampler, sample_equiangular};
 use crate::scene::Scene;
 
 /// What the camera pass needs of the iteration.
@@ -27,8 +30,8 @@ pub struct GatherContext<'a> {
     pub map: &'a PhotonMap,
     /// This iteration's surface radius.
     pub radius: f32,
-    /// This iteration's volume photons.
-    pub volume_map: &'a PhotonMap,
+    /// This iteration's volume photons, arranged for the estimator in use.
+    pub volume_map: VolumeMap<'a>,
     /// This iteration's volume radius.
     pub volume_radius: f32,
     /// Power of a stored photon's unit power.
@@ -41,25 +44,44 @@ pub struct GatherContext<'a> {
     pub rr_depth: u32,
 }
 
+/// The volume photons of an iteration, in the structure their estimator queries.
+#[derive(Clone, Copy)]
+pub enum VolumeMap<'a> {
+    /// For the beam radiance estimate: spheres crossed by a ray.
+    Beam(&'a BeamMap),
+    /// For the point estimate: photons near a point.
+    Point(&'a PhotonMap),
+}
+
 /// Radiance along the camera ray of one pixel sample.
 pub fn camera_path(ctx: &GatherContext, ray: Ray, sampler: &mut Sampler) -> Rgb {
     let scene = ctx.scene;
     let mut l = Rgb::ZERO;
     let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
     while walk.depth < ctx.max_depth {
-        match walk.next_event(scene, sampler) {
+        let event = match ctx.volume_map {
+            VolumeMap::Beam(beams) => walk.next_surface(scene, |w, m, t| {
+                let (scattered, transmitted) = beam_estimate(ctx, beams, &w.ray, m, t, sampler);
+                l += w.beta * scattered;
+                transmitted
+            }),
+            VolumeMap::Point(_) => walk.next_event(scene, sampler),
+        };
+        match event {
             Event::Gone => {
                 l += walk.escaped(scene);
                 break;
             }
-            // In a medium, the first collision is a gather point: direct light plus volume
-            // photons.
+            // The point estimate: the first collision is a gather point, direct light plus
+            // volume photons.
             Event::Medium { p, medium, weight } => {
                 walk.beta *= weight * scene.media[medium as usize].albedo;
                 let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
                 l += walk.beta
                     * direct::light_sample_in_medium(scene, p, walk.ray.d, medium, u_sel, u_light, 0.0);
-                l += walk.beta * volume_estimate(ctx, p, walk.ray.d, medium);
+                if let VolumeMap::Point(map) = ctx.volume_map {
+                    l += walk.beta * volume_estimate(ctx, map, p, walk.ray.d, medium);
+                }
                 break;
             }
             Event::Surface(hit) => {
@@ -124,10 +146,10 @@ fn photon_estimate(ctx: &GatherContext, hit: &Hit) -> Rgb {
 /// In-scattered radiance at `p` in medium `m`, for a path that travelled along `d`, from the
 /// volume photons within the volume radius: Σ phase · Φ / (σt · (4/3)π r³). Photons are stored
 /// at collisions, whose density is σt times the fluence, hence the division by σt.
-fn volume_estimate(ctx: &GatherContext, p: Vec3A, d: Vec3A, m: u32) -> Rgb {
+fn volume_estimate(ctx: &GatherContext, map: &PhotonMap, p: Vec3A, d: Vec3A, m: u32) -> Rgb {
     let med = &ctx.scene.media[m as usize];
     let mut sum = Rgb::ZERO;
-    ctx.volume_map.for_each_near(p, |ph, _| {
+    map.for_each_near(p, |ph, _| {
         sum += ph.power() * med.phase.eval(d, ph.direction());
     });
     if sum == Rgb::ZERO {
@@ -137,4 +159,91 @@ fn volume_estimate(ctx: &GatherContext, p: Vec3A, d: Vec3A, m: u32) -> Rgb {
     let volume = 4.0 / 3.0 * PI * r * r * r;
     let inv_sigma = Rgb::select(med.sigma_t.cmpgt(Rgb::ZERO), Rgb::ONE / med.sigma_t, Rgb::ZERO);
     sum * inv_sigma * (ctx.power_unit / volume)
+}
+
+/// Below this transmittance (from the stretch's start, in its clearest channel) the beam
+/// estimate plays Russian roulette with the rest of the stretch: in a dense medium, photons far
+/// along the ray contribute almost nothing and would cost as much as the near ones.
+const BEAM_ROULETTE_BELOW: f32 = 0.1;
+
+/// Light scattered towards the camera along `ray.at(0..t_max)` in medium `m`, per unit
+/// throughput at the ray's origin, and the throughput's factor over the stretch: the integral
+/// over the segment of what the point estimate gives at each of its points (times
+/// transmittance and σs), computed exactly for the volume photons and by one sampled collision
+/// for direct light.
+///
+/// A photon's sphere adds phase · Φ · albedo · ∫ Tr dt over its chord / ((4/3)π r³): the
+/// point estimate's 1/σt cancels the σt of the scattering rate, and the chord's length
+/// 2√(r² − d²) over the ball's volume is the projected-sphere kernel across the ray, which
+/// integrates to one over the disk of radius r (Jarosz et al. 2008, with this kernel).
+///
+/// Past a transmittance of [`BEAM_ROULETTE_BELOW`] the stretch survives to distance t with
+/// probability S(t) = Tr_max(t) / 0.1, decided by one random number for the whole stretch: a
+/// photon counts if S survives to its chord's start a, with weight 1/S(a), and the surface
+/// behind with Tr/S; unbiased, and the march ends where S does.
+fn beam_estimate(
+    ctx: &GatherContext,
+    beams: &BeamMap,
+    ray: &Ray,
+    m: u32,
+    t_max: f32,
+    sampler: &mut Sampler,
+) -> (Rgb, Rgb) {
+    let scene = ctx.scene;
+    let med = &scene.media[m as usize];
+    // Direct light (which photons do not store) at a collision drawn within the segment:
+    // equiangularly about a point light (its 1/d² would give the exponential's samples
+    // unbounded variance near the light), else by transmittance.
+    let (u_channel, u_t, u_sel, u_light) = (
+        sampler.next_1d(),
+        sampler.next_1d(),
+        sampler.next_1d(),
+        sampler.next_2d(),
+    );
+    let mut l = Rgb::ZERO;
+    if let Some((li, pmf)) = scene.pick_light(u_sel) {
+        let equiangular = scene.lights[li as usize].point_position().and_then(|c| {
+            let v = c - ray.o;
+            let delta = v.dot(ray.d);
+            let (t, pdf) = sample_equiangular(delta, (v - ray.d * delta).length(), t_max, u_t)?;
+            Some((t, med.sigma_t * med.transmittance(t) / pdf))
+        });
+        let collision = equiangular.or_else(|| med.sample_collision_within(t_max, u_channel, u_t));
+        if let Some((t, weight)) = collision {
+            let p = ray.at(t);
+            let ls = scene.sample_picked_light(li, pmf, p, u_light);
+            l += weight * med.albedo * direct::light_in_medium(scene, p, ray.d, m, ls, 0.0);
+        }
+    }
+    // The roulette: survival S(t) and the distance where it fails.
+    let sigma_min = med.sigma_t.min_element();
+    let u_cut = sampler.next_1d();
+    let survival = |t: f32| {
+        if sigma_min > 0.0 {
+            ((-sigma_min * t).exp() / BEAM_ROULETTE_BELOW).min(1.0)
+        } else {
+            1.0
+        }
+    };
+    let t_cut = if sigma_min > 0.0 {
+        -(u_cut * BEAM_ROULETTE_BELOW).ln() / sigma_min
+    } else {
+        f32::INFINITY
+    };
+    let mut sum = Rgb::ZERO;
+    beams.for_each_on_segment(ray, t_max, t_cut, |ph, a, b| {
+        let tr = med.integrated_transmittance(a, b) / survival(a);
+        sum += ph.power * tr * med.phase.eval(ray.d, ph.direction);
+    });
+    if sum != Rgb::ZERO {
+        let r = ctx.volume_radius;
+        l += sum * med.albedo * (ctx.power_unit / (4.0 / 3.0 * PI * r * r * r));
+    }
+    let s_end = survival(t_max);
+    let transmitted = if (t_max < t_cut || t_cut == f32::INFINITY) && s_end > 0.0 {
+        med.transmittance(t_max) / s_end
+    } else {
+        Rgb::ZERO
+    };
+    (l, transmitted)
 }

@@ -6,19 +6,57 @@
 //! lets any machine render any batch. Steps of iteration i: [`trace::trace_photons`] (photon
 //! pass), [`PhotonMap::build`], then [`gather::camera_path`] for every pixel (camera pass).
 
+mod beam_map;
 mod gather;
+mod grid;
 mod photon;
 mod photon_map;
 mod radius;
 mod trace;
 
-pub use gather::{GatherContext, camera_path};
+pub use beam_map::BeamMap;
+pub use gather::{GatherContext, VolumeMap, camera_path};
 pub use photon::Photon;
 pub use photon_map::PhotonMap;
 pub use radius::RadiusSchedule;
 pub use trace::{PhotonBuffers, power_unit, trace_photons};
 
 use crate::scene::Scene;
+
+/// How the camera pass estimates light scattered in media from the volume photons.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VolumeEstimate {
+    /// Jarosz et al.'s beam radiance estimate: every photon sphere the camera ray crosses
+    /// counts, and the ray goes on to the surface behind (see docs/volumes.md).
+    #[default]
+    Beam,
+    /// The point estimate at one sampled collision, where the camera path ends.
+    Point,
+}
+
+impl VolumeEstimate {
+    /// Dimension of the estimate's kernel, which Knaus and Zwicker's schedule shrinks: the
+    /// beam's kernel spreads across the ray only (2), the point's in space (3).
+    pub fn kernel_dimension(self) -> u32 {
+        match self {
+            VolumeEstimate::Beam => 2,
+            VolumeEstimate::Point => 3,
+        }
+    }
+
+    /// The initial volume radius over the surface radius when neither the scene nor the user
+    /// gives one. The beam's kernel blurs across the ray as the surface kernel does across the
+    /// image, and its cost grows as r² along every ray: half the surface radius had the lowest
+    /// equal-time error on fog.xml (of 2, 1, 0.5 and 0.25; docs/volumes.md). The point estimate
+    /// gathers in a ball at one point and keeps 2.
+    pub fn default_radius_ratio(self) -> f32 {
+        match self {
+            VolumeEstimate::Beam => 0.5,
+            VolumeEstimate::Point => 2.0,
+        }
+    }
+}
 
 /// SPPM's parameters.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -33,6 +71,9 @@ pub struct SppmSettings {
     pub k: f32,
     /// Initial volume radius over the initial surface radius.
     pub volume_radius_ratio: f32,
+    /// The volume estimator.
+    #[serde(default)]
+    pub volume_estimate: VolumeEstimate,
     /// Longest photon path and longest camera path (None: Russian roulette decides).
     pub max_depth: Option<u32>,
     /// Depth from which the camera path's Russian roulette applies.
@@ -90,7 +131,8 @@ impl SppmSettings {
             initial_radius: 0.0,
             alpha: 2.0 / 3.0,
             k: 1.1,
-            volume_radius_ratio: 2.0,
+            volume_radius_ratio: VolumeEstimate::default().default_radius_ratio(),
+            volume_estimate: VolumeEstimate::default(),
             max_depth: u32::try_from(decl.max_depth).ok(),
             rr_depth: decl.rr_depth,
         };
@@ -116,6 +158,16 @@ impl SppmSettings {
         (s, warnings)
     }
 
+    /// These settings with volume estimate `estimate`, and its default volume radius ratio
+    /// (for a caller that did not choose a ratio).
+    pub fn with_volume_estimate(self, estimate: VolumeEstimate) -> SppmSettings {
+        SppmSettings {
+            volume_estimate: estimate,
+            volume_radius_ratio: estimate.default_radius_ratio(),
+            ..self
+        }
+    }
+
     /// The surface radius schedule (r² shrinks).
     pub fn schedule(&self) -> RadiusSchedule {
         RadiusSchedule {
@@ -125,13 +177,13 @@ impl SppmSettings {
         }
     }
 
-    /// The volume radius schedule (r³ shrinks, from `volume_radius_ratio` times the surface
-    /// radius).
+    /// The volume radius schedule, from `volume_radius_ratio` times the surface radius: r² shrinks
+    /// for the beam estimate, r³ for the point estimate.
     pub fn volume_schedule(&self) -> RadiusSchedule {
         RadiusSchedule {
             initial: self.initial_radius as f64 * self.volume_radius_ratio as f64,
             alpha: self.alpha,
-            dimension: 3,
+            dimension: self.volume_estimate.kernel_dimension(),
         }
     }
 

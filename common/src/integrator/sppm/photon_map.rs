@@ -7,6 +7,7 @@
 
 use glam::Vec3A;
 
+use super::grid::{buckets_of_sphere, cell_of, hash_cell};
 use super::photon::Photon;
 
 /// Photons bucketed by grid cell.
@@ -21,20 +22,6 @@ pub struct PhotonMap {
     /// Scratch: each input photon's bucket, then each bucket's write position.
     buckets: Vec<u32>,
     cursor: Vec<u32>,
-}
-
-#[inline]
-fn hash_cell(c: [i32; 3], mask: usize) -> usize {
-    let h = (c[0] as u32).wrapping_mul(73_856_093)
-        ^ (c[1] as u32).wrapping_mul(19_349_663)
-        ^ (c[2] as u32).wrapping_mul(83_492_791);
-    (h as usize) & mask
-}
-
-#[inline]
-fn cell_of(p: Vec3A, inv_cell: f32) -> [i32; 3] {
-    let c = (p * inv_cell).floor();
-    [c.x as i32, c.y as i32, c.z as i32]
 }
 
 impl PhotonMap {
@@ -93,23 +80,8 @@ impl PhotonMap {
             return;
         }
         let r = self.radius;
-        let lo = cell_of(p - Vec3A::splat(r), self.inv_cell);
-        let hi = cell_of(p + Vec3A::splat(r), self.inv_cell);
-        // At most 2 cells per axis; distinct cells may share a bucket, so visit each bucket once.
-        let mut seen = [usize::MAX; 8];
-        let mut n = 0;
-        for x in lo[0]..=hi[0].min(lo[0] + 1) {
-            for y in lo[1]..=hi[1].min(lo[1] + 1) {
-                for z in lo[2]..=hi[2].min(lo[2] + 1) {
-                    let b = hash_cell([x, y, z], self.mask);
-                    if seen[..n].contains(&b) {
-                        continue;
-                    }
-                    seen[n] = b;
-                    n += 1;
-                }
-            }
-        }
+        let mut seen = [0usize; 8];
+        let n = buckets_of_sphere(p, r, self.inv_cell, self.mask, &mut seen);
         let r2 = r * r;
         for &b in &seen[..n] {
             for ph in &self.photons[self.starts[b] as usize..self.starts[b + 1] as usize] {
