@@ -17,7 +17,7 @@
 
 use glam::Vec3A;
 
-use super::grid::{buckets_of_sphere, cell_of, hash_cell};
+use super::grid::{Buckets, buckets_of_sphere, cell_of, hash_cell};
 use super::photon::Photon;
 use crate::color::Rgb;
 use crate::geometry::Ray;
@@ -53,8 +53,7 @@ pub struct BeamMap {
     lo: Vec3A,
     hi: Vec3A,
     photons: Vec<BeamPhoton>,
-    /// Bucket b lists `entries[starts[b]..starts[b + 1]]`.
-    starts: Vec<u32>,
+    buckets: Buckets,
     entries: Vec<Entry>,
 }
 
@@ -95,32 +94,21 @@ impl BeamMap {
         }
         self.lo -= Vec3A::splat(radius);
         self.hi += Vec3A::splat(radius);
-        // Counting sort of (bucket, photon) pairs: count, prefix sums, fill in photon order.
-        self.starts.clear();
-        self.starts.resize(size + 1, 0);
-        let mut b = [0usize; 8];
-        for p in photons {
-            let n = buckets_of_sphere(p.position(), radius, inv_cell, self.mask, &mut b);
-            for &bucket in &b[..n] {
-                self.starts[bucket + 1] += 1;
-            }
-        }
-        for i in 0..size {
-            self.starts[i + 1] += self.starts[i];
-        }
-        self.entries.clear();
-        self.entries.resize(self.starts[size] as usize, Entry::default());
-        let mut cursor = self.starts[..size].to_vec();
-        for (i, p) in photons.iter().enumerate() {
-            let n = buckets_of_sphere(p.position(), radius, inv_cell, self.mask, &mut b);
-            for &bucket in &b[..n] {
-                self.entries[cursor[bucket] as usize] = Entry {
-                    position: p.p,
-                    index: i as u32,
-                };
-                cursor[bucket] += 1;
-            }
-        }
+        let mask = self.mask;
+        self.buckets.sort(
+            size,
+            |add| {
+                let mut b = [0usize; 8];
+                for (i, p) in photons.iter().enumerate() {
+                    let n = buckets_of_sphere(p.position(), radius, inv_cell, mask, &mut b);
+                    for &bucket in &b[..n] {
+                        let index = i as u32;
+                        add(bucket, Entry { position: p.p, index });
+                    }
+                }
+            },
+            &mut self.entries,
+        );
     }
 
     /// Calls `f(photon, a, b)` once for every photon whose sphere the segment
@@ -176,8 +164,7 @@ impl BeamMap {
             // Cells own [t_in, t_out); the last one also owns its end, the segment's end.
             let last = t_next[axis] >= t1;
             let bucket = hash_cell(cell, self.mask);
-            let span = self.starts[bucket] as usize..self.starts[bucket + 1] as usize;
-            for e in &self.entries[span] {
+            for e in &self.entries[self.buckets.range(bucket)] {
                 let v = Vec3A::from(e.position) - o;
                 let tp = v.dot(d);
                 // The segment's point nearest the photon decides which cell counts it.

@@ -40,3 +40,45 @@ pub fn buckets_of_sphere(p: Vec3A, r: f32, inv_cell: f32, mask: usize, out: &mut
     }
     n
 }
+
+/// Items grouped by bucket, by one counting sort: the build both photon maps share.
+#[derive(Debug, Default)]
+pub struct Buckets {
+    /// Bucket b's items are `items[starts[b]..starts[b + 1]]`.
+    starts: Vec<u32>,
+    /// Scratch: each bucket's next write position (kept between builds, so memory stays flat).
+    cursor: Vec<u32>,
+}
+
+impl Buckets {
+    /// Sorts the (bucket, item) pairs that `pairs` yields into `items` by bucket, keeping their
+    /// order within a bucket (so queries visit them in a deterministic order). `pairs` is called
+    /// twice, to count and to fill, and must yield the same pairs both times.
+    pub fn sort<T: Copy + Default>(
+        &mut self,
+        buckets: usize,
+        pairs: impl Fn(&mut dyn FnMut(usize, T)),
+        items: &mut Vec<T>,
+    ) {
+        self.starts.clear();
+        self.starts.resize(buckets + 1, 0);
+        pairs(&mut |b, _| self.starts[b + 1] += 1);
+        for i in 0..buckets {
+            self.starts[i + 1] += self.starts[i];
+        }
+        items.clear();
+        items.resize(self.starts[buckets] as usize, T::default());
+        self.cursor.clear();
+        self.cursor.extend_from_slice(&self.starts[..buckets]);
+        pairs(&mut |b, item| {
+            items[self.cursor[b] as usize] = item;
+            self.cursor[b] += 1;
+        });
+    }
+
+    /// Where bucket `b`'s items are.
+    #[inline]
+    pub fn range(&self, b: usize) -> std::ops::Range<usize> {
+        self.starts[b] as usize..self.starts[b + 1] as usize
+    }
+}

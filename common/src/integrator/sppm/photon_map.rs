@@ -7,7 +7,7 @@
 
 use glam::Vec3A;
 
-use super::grid::{buckets_of_sphere, cell_of, hash_cell};
+use super::grid::{Buckets, buckets_of_sphere, cell_of, hash_cell};
 use super::photon::Photon;
 
 /// Photons bucketed by grid cell.
@@ -16,12 +16,8 @@ pub struct PhotonMap {
     inv_cell: f32,
     radius: f32,
     mask: usize,
-    /// Bucket b's photons are `photons[starts[b]..starts[b + 1]]`.
-    starts: Vec<u32>,
+    buckets: Buckets,
     photons: Vec<Photon>,
-    /// Scratch: each input photon's bucket, then each bucket's write position.
-    buckets: Vec<u32>,
-    cursor: Vec<u32>,
 }
 
 impl PhotonMap {
@@ -47,30 +43,16 @@ impl PhotonMap {
         self.inv_cell = 1.0 / (2.0 * radius);
         let size = photons.len().max(1).next_power_of_two();
         self.mask = size - 1;
-        self.starts.clear();
-        self.starts.resize(size + 1, 0);
         let (inv_cell, mask) = (self.inv_cell, self.mask);
-        self.buckets.clear();
-        self.buckets.extend(
-            photons
-                .iter()
-                .map(|p| hash_cell(cell_of(p.position(), inv_cell), mask) as u32),
+        self.buckets.sort(
+            size,
+            |add| {
+                for p in photons {
+                    add(hash_cell(cell_of(p.position(), inv_cell), mask), *p);
+                }
+            },
+            &mut self.photons,
         );
-        for &b in &self.buckets {
-            self.starts[b as usize + 1] += 1;
-        }
-        for i in 0..size {
-            self.starts[i + 1] += self.starts[i];
-        }
-        self.photons.clear();
-        self.photons.resize(photons.len(), Photon::default());
-        self.cursor.clear();
-        self.cursor.extend_from_slice(&self.starts[..size]);
-        for (p, &b) in photons.iter().zip(&self.buckets) {
-            let slot = &mut self.cursor[b as usize];
-            self.photons[*slot as usize] = *p;
-            *slot += 1;
-        }
     }
 
     /// Calls `f(photon, squared distance)` for every photon within the radius of `p`.
@@ -84,7 +66,7 @@ impl PhotonMap {
         let n = buckets_of_sphere(p, r, self.inv_cell, self.mask, &mut seen);
         let r2 = r * r;
         for &b in &seen[..n] {
-            for ph in &self.photons[self.starts[b] as usize..self.starts[b + 1] as usize] {
+            for ph in &self.photons[self.buckets.range(b)] {
                 let d2 = (ph.position() - p).length_squared();
                 if d2 < r2 {
                     f(ph, d2);
