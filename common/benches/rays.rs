@@ -4,6 +4,11 @@
 //! a path-tracing mix of rays (camera, diffuse bounce, shadow) per second, and path-traced
 //! samples per second; medians of 5 runs taken in one process. Scenes: the Cornell box and a
 //! generated bumpy sphere of 131,072 triangles loaded from a binary PLY file.
+//!
+//! With `--features obvhs` it also records one set of camera, bounce and shadow rays per scene
+//! and traces exactly those with our BVH, obvhs's CWBVH and obvhs's BVH2 (BVH only, no surface
+//! evaluation): rays per second per type (medians of 5), build times and hit mismatches against
+//! ours.
 
 use std::io::Write;
 use std::path::Path;
@@ -137,11 +142,169 @@ fn bench(name: &str, scene: &Scene) {
     );
 }
 
+/// One scene's recorded rays: camera and bounce rays (closest hit, t_max ∞) and shadow rays
+/// (occlusion, t_max 1 - 1e-4, unnormalised direction), made as the path tracer makes them.
+#[cfg(feature = "obvhs")]
+struct Recorded {
+    camera: Vec<photonfarm::geometry::Ray>,
+    bounce: Vec<photonfarm::geometry::Ray>,
+    shadow: Vec<photonfarm::geometry::Ray>,
+}
+
+#[cfg(feature = "obvhs")]
+const SHADOW_T_MAX: f32 = 1.0 - 1e-4;
+
+#[cfg(feature = "obvhs")]
+fn record(scene: &Scene) -> Recorded {
+    use photonfarm::geometry::{Ray, offset_ray_origin};
+    let mut r = Recorded {
+        camera: Vec::new(),
+        bounce: Vec::new(),
+        shadow: Vec::new(),
+    };
+    for y in 0..scene.height() {
+        for x in 0..scene.width() {
+            let mut s = Sampler::new(1, Stream::Camera, 0, (y * scene.width() + x) as u64);
+            let ray = scene.camera.generate_ray(x, y, s.next_2d(), Vec2::ZERO);
+            r.camera.push(ray);
+            let Some((_, sp)) = scene.intersect(&ray) else {
+                continue;
+            };
+            let frame = Frame::from_normal(sp.ns);
+            let w = frame.to_world(square_to_cosine_hemisphere(s.next_2d()));
+            r.bounce.push(Scene::spawn_ray(&sp, w));
+            if let Some((_, ls)) = scene.sample_light(sp.p, s.next_1d(), s.next_2d()) {
+                // As Scene::transmittance builds its first segment.
+                let o = offset_ray_origin(sp.p, sp.p_err, sp.ng, ls.wi);
+                let target = if ls.n == glam::Vec3A::ZERO {
+                    ls.p
+                } else {
+                    offset_ray_origin(ls.p, ls.p_err, ls.n, o - ls.p)
+                };
+                r.shadow.push(Ray::new(o, target - o));
+            }
+        }
+    }
+    r
+}
+
+/// Ours vs obvhs's CWBVH vs its BVH2 on the same recorded rays. The backends take turns within
+/// each run, so that load from other processes falls on all of them alike.
+#[cfg(feature = "obvhs")]
+fn ab(name: &str, scene: &Scene) {
+    use photonfarm::geometry::{Backend, Bvh};
+    use std::hint::black_box;
+    const AB_RUNS: usize = 15;
+    let rays = record(scene);
+    let prims = scene.bvh.primitives().to_vec();
+    let backends = [Backend::Own, Backend::Cwbvh, Backend::Bvh2];
+    let mut builds = vec![Vec::new(); backends.len()];
+    let mut bvhs = Vec::new();
+    for _ in 0..RUNS {
+        bvhs.clear();
+        for (i, &b) in backends.iter().enumerate() {
+            let t = Instant::now();
+            bvhs.push(Bvh::build_with(prims.clone(), b));
+            builds[i].push(t.elapsed().as_secs_f64());
+        }
+    }
+    let counts = [
+        rays.camera.len(),
+        rays.bounce.len(),
+        rays.shadow.len(),
+        rays.camera.len() + rays.bounce.len() + rays.shadow.len(),
+    ];
+    // [backend][ray type] -> M rays/s of each run.
+    let mut rates = vec![[(); 4].map(|_| Vec::new()); backends.len()];
+    for _ in 0..AB_RUNS {
+        for (i, bvh) in bvhs.iter().enumerate() {
+            let t0 = Instant::now();
+            for r in &rays.camera {
+                black_box(bvh.intersect(r, f32::INFINITY));
+            }
+            let t1 = Instant::now();
+            for r in &rays.bounce {
+                black_box(bvh.intersect(r, f32::INFINITY));
+            }
+            let t2 = Instant::now();
+            for r in &rays.shadow {
+                black_box(bvh.occluded(r, SHADOW_T_MAX));
+            }
+            let t3 = Instant::now();
+            let secs = [t1 - t0, t2 - t1, t3 - t2, t3 - t0].map(|d| d.as_secs_f64());
+            for k in 0..4 {
+                rates[i][k].push(counts[k] as f64 / secs[k] / 1e6);
+            }
+        }
+    }
+    let closest = |bvh: &Bvh, rs: &[photonfarm::geometry::Ray]| -> Vec<Option<f32>> {
+        rs.iter()
+            .map(|r| bvh.intersect(r, f32::INFINITY).map(|h| h.t))
+            .collect()
+    };
+    let results: Vec<_> = bvhs
+        .iter()
+        .map(|bvh| {
+            let sha: Vec<bool> = rays
+                .shadow
+                .iter()
+                .map(|r| bvh.occluded(r, SHADOW_T_MAX))
+                .collect();
+            (closest(bvh, &rays.camera), closest(bvh, &rays.bounce), sha)
+        })
+        .collect();
+    let differs = |a: &Option<f32>, b: &Option<f32>| match (a, b) {
+        (Some(a), Some(b)) => (a - b).abs() > 1e-4 * a.abs(),
+        (None, None) => false,
+        _ => true,
+    };
+    println!(
+        "  A/B on {name}: {} camera, {} bounce, {} shadow rays; M rays/s/core, median (best) of {AB_RUNS}",
+        counts[0], counts[1], counts[2]
+    );
+    println!(
+        "  {:<7} {:>9} {:>15} {:>15} {:>15} {:>15} {:>11}",
+        "backend", "build ms", "camera", "bounce", "shadow", "all", "mismatches"
+    );
+    let (rc, rb, rs) = &results[0];
+    for (i, bvh) in bvhs.iter().enumerate() {
+        let (c, b, s) = &results[i];
+        let mismatches = if i == 0 {
+            "(reference)".to_string()
+        } else {
+            let mc = rc.iter().zip(c).filter(|(x, y)| differs(x, y)).count();
+            let mb = rb.iter().zip(b).filter(|(x, y)| differs(x, y)).count();
+            let ms = rs.iter().zip(s).filter(|(x, y)| x != y).count();
+            format!("{mc}/{mb}/{ms}")
+        };
+        let cell = |v: &Vec<f64>| {
+            let best = v.iter().copied().fold(0.0, f64::max);
+            format!("{:.2} ({:.2})", median(v.clone()), best)
+        };
+        println!(
+            "  {:<7} {:>9.2} {:>15} {:>15} {:>15} {:>15} {mismatches:>11}{}",
+            format!("{:?}", bvh.backend()).to_lowercase(),
+            median(builds[i].clone()) * 1e3,
+            cell(&rates[i][0]),
+            cell(&rates[i][1]),
+            cell(&rates[i][2]),
+            cell(&rates[i][3]),
+            if bvh.backend() != backends[i] {
+                "  (fell back to ours)"
+            } else {
+                ""
+            }
+        );
+    }
+}
+
 fn main() {
     let refs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs");
     let res = [("res".to_string(), "256".to_string())];
     let cbox = Scene::load(&refs.join("cbox.xml"), &res).unwrap();
     bench("cbox (36 triangles)", &cbox);
+    #[cfg(feature = "obvhs")]
+    ab("cbox", &cbox);
 
     let dir = tempfile::tempdir().unwrap();
     let tris = write_bumpy_sphere(&dir.path().join("bumpy.ply"), 256, 256);
@@ -160,4 +323,6 @@ fn main() {
         t.elapsed().as_secs_f64()
     );
     bench(&format!("bumpy sphere ({}k triangles)", tris / 1000), &mesh);
+    #[cfg(feature = "obvhs")]
+    ab("bumpy sphere", &mesh);
 }

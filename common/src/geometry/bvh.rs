@@ -28,11 +28,50 @@ struct Node {
     axis: u8,
 }
 
+/// Which traversal structure a [`Bvh`] uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    /// Ours: binned SAH, binary, one box test per node.
+    Own,
+    /// obvhs's compressed 8-wide BVH (PLOC build, SSE2 node test).
+    #[cfg(feature = "obvhs")]
+    Cwbvh,
+    /// obvhs's binary BVH (PLOC build, reinsertion, SAH leaf collapse).
+    #[cfg(feature = "obvhs")]
+    Bvh2,
+}
+
+/// The traversal structure behind a [`Bvh`].
+#[derive(Clone, Default)]
+enum Accel {
+    #[default]
+    Empty,
+    Own(Vec<Node>),
+    #[cfg(feature = "obvhs")]
+    Cw(Box<obvhs::cwbvh::CwBvh>),
+    #[cfg(feature = "obvhs")]
+    Bin(Box<obvhs::bvh2::Bvh2>),
+}
+
+impl std::fmt::Debug for Accel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Accel::Empty => f.write_str("Empty"),
+            Accel::Own(n) => write!(f, "Own({} nodes)", n.len()),
+            #[cfg(feature = "obvhs")]
+            Accel::Cw(c) => write!(f, "Cwbvh({} nodes)", c.nodes.len()),
+            #[cfg(feature = "obvhs")]
+            Accel::Bin(b) => write!(f, "Bvh2({} nodes)", b.nodes.len()),
+        }
+    }
+}
+
 /// The scene's acceleration structure; owns the primitives in traversal order.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
-    nodes: Vec<Node>,
+    accel: Accel,
     prims: Vec<Primitive>,
+    bounds: Aabb,
 }
 
 struct BuildItem {
@@ -44,6 +83,39 @@ struct BuildItem {
 impl Bvh {
     /// Builds the tree; primitives are reordered so that each leaf's are contiguous.
     pub fn build(prims: Vec<Primitive>) -> Bvh {
+        Self::build_with(prims, Backend::Own)
+    }
+
+    /// Builds the tree with the given backend (an empty scene always gets an empty tree).
+    pub fn build_with(prims: Vec<Primitive>, backend: Backend) -> Bvh {
+        let bounds = prims.iter().fold(Aabb::EMPTY, |b, p| b.union(p.bounds()));
+        if prims.is_empty() {
+            return Bvh::default();
+        }
+        match backend {
+            Backend::Own => Self::build_own(prims, bounds),
+            #[cfg(feature = "obvhs")]
+            Backend::Cwbvh | Backend::Bvh2 => {
+                obvhs_backend::build(prims, bounds, backend == Backend::Cwbvh).unwrap_or_else(|prims| {
+                    // Too deep for the CWBVH's fixed traversal stack: ours bounds its depth.
+                    Self::build_own(prims, bounds)
+                })
+            }
+        }
+    }
+
+    /// Which backend this tree uses.
+    pub fn backend(&self) -> Backend {
+        match &self.accel {
+            Accel::Empty | Accel::Own(_) => Backend::Own,
+            #[cfg(feature = "obvhs")]
+            Accel::Cw(_) => Backend::Cwbvh,
+            #[cfg(feature = "obvhs")]
+            Accel::Bin(_) => Backend::Bvh2,
+        }
+    }
+
+    fn build_own(prims: Vec<Primitive>, bounds: Aabb) -> Bvh {
         let mut items: Vec<BuildItem> = prims
             .iter()
             .enumerate()
@@ -65,7 +137,11 @@ impl Bvh {
             .iter()
             .map(|it| slots[it.index].take().expect("each primitive is placed once"))
             .collect();
-        Bvh { nodes, prims }
+        Bvh {
+            accel: Accel::Own(nodes),
+            prims,
+            bounds,
+        }
     }
 
     /// Primitives in BVH order; [`Hit::prim`] indexes this.
@@ -75,44 +151,65 @@ impl Bvh {
 
     /// Bounds of everything.
     pub fn bounds(&self) -> Aabb {
-        self.nodes.first().map(|n| n.bounds).unwrap_or(Aabb::EMPTY)
+        self.bounds
     }
 
     /// Closest hit in (0, t_max).
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut t_max = t_max;
-        self.traverse(ray, &mut t_max, |prim, t, b1, b2| {
-            best = Some(Hit { t, prim, b1, b2 });
-            false
-        });
-        best
+        match &self.accel {
+            Accel::Empty => None,
+            Accel::Own(nodes) => {
+                let mut best: Option<Hit> = None;
+                let mut t_max = t_max;
+                self.traverse(nodes, ray, &mut t_max, |prim, t, b1, b2| {
+                    best = Some(Hit { t, prim, b1, b2 });
+                    false
+                });
+                best
+            }
+            #[cfg(feature = "obvhs")]
+            Accel::Cw(cw) => obvhs_backend::intersect_cw(cw, &self.prims, ray, t_max),
+            #[cfg(feature = "obvhs")]
+            Accel::Bin(b) => obvhs_backend::intersect_bin(b, &self.prims, ray, t_max),
+        }
     }
 
     /// Whether anything lies in (0, t_max): shadow rays stop at the first hit.
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
-        let mut found = false;
-        let mut t_max = t_max;
-        self.traverse(ray, &mut t_max, |_, _, _, _| {
-            found = true;
-            true
-        });
-        found
+        match &self.accel {
+            Accel::Empty => false,
+            Accel::Own(nodes) => {
+                let mut found = false;
+                let mut t_max = t_max;
+                self.traverse(nodes, ray, &mut t_max, |_, _, _, _| {
+                    found = true;
+                    true
+                });
+                found
+            }
+            #[cfg(feature = "obvhs")]
+            Accel::Cw(cw) => obvhs_backend::occluded_cw(cw, &self.prims, ray, t_max),
+            #[cfg(feature = "obvhs")]
+            Accel::Bin(b) => obvhs_backend::occluded_bin(b, &self.prims, ray, t_max),
+        }
     }
 
     /// Front-to-back traversal; `on_hit` returns true to stop.
     #[inline]
-    fn traverse(&self, ray: &Ray, t_max: &mut f32, mut on_hit: impl FnMut(u32, f32, f32, f32) -> bool) {
-        if self.nodes.is_empty() {
-            return;
-        }
+    fn traverse(
+        &self,
+        nodes: &[Node],
+        ray: &Ray,
+        t_max: &mut f32,
+        mut on_hit: impl FnMut(u32, f32, f32, f32) -> bool,
+    ) {
         let inv_d = Vec3A::ONE / ray.d;
         let neg = [inv_d.x < 0.0, inv_d.y < 0.0, inv_d.z < 0.0];
         let mut stack = [0u32; STACK];
         let mut sp = 0usize;
         let mut current = 0u32;
         loop {
-            let node = &self.nodes[current as usize];
+            let node = &nodes[current as usize];
             if node.bounds.hit(ray, inv_d, *t_max) {
                 if node.count > 0 {
                     let first = node.offset as usize;
@@ -142,6 +239,146 @@ impl Bvh {
             sp -= 1;
             current = stack[sp];
         }
+    }
+}
+
+/// The obvhs backends: PLOC-built trees over our primitives' boxes, our primitive tests.
+#[cfg(feature = "obvhs")]
+mod obvhs_backend {
+    use obvhs::BvhBuildParams;
+    use obvhs::bvh2::Bvh2;
+    use obvhs::bvh2::leaf_collapser::collapse;
+    use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
+    use obvhs::cwbvh::CwBvh;
+    use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
+    use obvhs::ploc::PlocBuilder;
+    use obvhs::ray::{Ray as ORay, RayHit};
+
+    use super::{Accel, Bvh};
+    use crate::geometry::{Aabb, Hit, Primitive, Ray};
+
+    /// Deepest CWBVH its traversal can walk: obvhs's stack holds 32 entries and overwrites the
+    /// last one silently when full.
+    const CW_MAX_DEPTH: usize = 30;
+
+    /// Builds with the steps of obvhs's `build_cwbvh` / `build_bvh2` (medium preset) but
+    /// without their debug-build validation. Err gives the primitives back when the CWBVH is
+    /// too deep to traverse safely.
+    pub(super) fn build(prims: Vec<Primitive>, bounds: Aabb, wide: bool) -> Result<Bvh, Vec<Primitive>> {
+        let config = BvhBuildParams::medium_build();
+        let aabbs: Vec<obvhs::aabb::Aabb> = prims
+            .iter()
+            .map(|p| {
+                let b = p.bounds();
+                obvhs::aabb::Aabb::new(b.min, b.max)
+            })
+            .collect();
+        let mut bvh2 = PlocBuilder::with_capacity(aabbs.len()).build(
+            config.ploc_search_distance,
+            &aabbs,
+            (0..aabbs.len() as u32).collect(),
+            config.sort_precision,
+            config.search_depth_threshold,
+        );
+        let mut reinsertion = ReinsertionOptimizer::default();
+        reinsertion.run(&mut bvh2, config.reinsertion_batch_ratio, None);
+        let (accel, order) = if wide {
+            let cw = bvh2_to_cwbvh(&bvh2, config.max_prims_per_leaf.clamp(1, 3), true, false);
+            if cw_depth(&cw, 0) > CW_MAX_DEPTH {
+                return Err(prims);
+            }
+            let order = cw.primitive_indices.clone();
+            (Accel::Cw(Box::new(cw)), order)
+        } else {
+            collapse(
+                &mut bvh2,
+                config.max_prims_per_leaf.clamp(1, 255),
+                config.collapse_traversal_cost,
+            );
+            reinsertion.run(
+                &mut bvh2,
+                config.reinsertion_batch_ratio * config.post_collapse_reinsertion_batch_ratio_multiplier,
+                None,
+            );
+            let order = bvh2.primitive_indices.clone();
+            (Accel::Bin(Box::new(bvh2)), order)
+        };
+        // Reorder the primitives so that the trees' primitive ids index them directly.
+        let mut slots: Vec<Option<Primitive>> = prims.into_iter().map(Some).collect();
+        let prims: Vec<Primitive> = order
+            .iter()
+            .map(|&i| slots[i as usize].take().expect("each primitive is placed once"))
+            .collect();
+        assert!(
+            slots.iter().all(Option::is_none),
+            "every primitive is in the tree"
+        );
+        Ok(Bvh { accel, prims, bounds })
+    }
+
+    /// Levels below `node` (a node with only leaf children has depth 1).
+    fn cw_depth(cw: &CwBvh, node: usize) -> usize {
+        let n = &cw.nodes[node];
+        1 + (0..8)
+            .filter(|&c| !n.is_leaf(c))
+            .map(|c| cw_depth(cw, n.child_node_index(c) as usize))
+            .max()
+            .unwrap_or(0)
+    }
+
+    #[inline]
+    fn oray(ray: &Ray, t_max: f32) -> ORay {
+        ORay::new(ray.o, ray.d, 0.0, t_max)
+    }
+
+    pub(super) fn intersect_cw(cw: &CwBvh, prims: &[Primitive], ray: &Ray, t_max: f32) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        cw.ray_traverse(oray(ray, t_max), &mut RayHit::none(), |r, id| {
+            match prims[id].intersect(ray, r.tmax) {
+                Some((t, b1, b2)) => {
+                    best = Some(Hit {
+                        t,
+                        prim: id as u32,
+                        b1,
+                        b2,
+                    });
+                    t
+                }
+                None => f32::INFINITY,
+            }
+        });
+        best
+    }
+
+    pub(super) fn occluded_cw(cw: &CwBvh, prims: &[Primitive], ray: &Ray, t_max: f32) -> bool {
+        !cw.ray_traverse_miss(oray(ray, t_max), |r, id| {
+            prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.0)
+        })
+    }
+
+    pub(super) fn intersect_bin(b: &Bvh2, prims: &[Primitive], ray: &Ray, t_max: f32) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        b.ray_traverse(oray(ray, t_max), &mut RayHit::none(), |r, id| {
+            match prims[id].intersect(ray, r.tmax) {
+                Some((t, b1, b2)) => {
+                    best = Some(Hit {
+                        t,
+                        prim: id as u32,
+                        b1,
+                        b2,
+                    });
+                    t
+                }
+                None => f32::INFINITY,
+            }
+        });
+        best
+    }
+
+    pub(super) fn occluded_bin(b: &Bvh2, prims: &[Primitive], ray: &Ray, t_max: f32) -> bool {
+        !b.ray_traverse_miss(oray(ray, t_max), |r, id| {
+            prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.0)
+        })
     }
 }
 
@@ -279,13 +516,22 @@ mod tests {
     }
 
     /// Depth of the deepest leaf.
-    fn depth(bvh: &Bvh, node: usize) -> usize {
-        let n = &bvh.nodes[node];
+    fn depth(nodes: &[Node], node: usize) -> usize {
+        let n = &nodes[node];
         if n.count > 0 {
             0
         } else {
-            1 + depth(bvh, node + 1).max(depth(bvh, n.offset as usize))
+            1 + depth(nodes, node + 1).max(depth(nodes, n.offset as usize))
         }
+    }
+
+    /// Every backend this build has.
+    fn backends() -> Vec<Backend> {
+        #[allow(unused_mut)]
+        let mut b = vec![Backend::Own];
+        #[cfg(feature = "obvhs")]
+        b.extend([Backend::Cwbvh, Backend::Bvh2]);
+        b
     }
 
     /// Spheres shrinking geometrically towards the origin, placed on the x, y and z axes in
@@ -316,43 +562,63 @@ mod tests {
         // 90 spheres: with the SAH alone the tree was 87 levels deep and a ray from the small
         // end overflowed the old fixed stack of 64 entries (index out of bounds).
         let prims = progression(90);
-        let bvh = Bvh::build(prims.clone());
-        let d = depth(&bvh, 0);
-        assert!(d < STACK, "depth {d}");
-        let mut s = Sampler::new(5, Stream::Camera, 0, 0);
-        for _ in 0..500 {
-            // From below the origin outwards: the near child is always the deeper subtree, so
-            // every level pushes one entry.
-            // Towards the origin, where the smallest spheres are, passing between them.
-            let target = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 1e-30;
-            let o = Vec3A::splat(-1.0);
-            let ray = Ray::new(o, (target - o).normalize());
-            let brute = prims
-                .iter()
-                .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| h.0))
-                .min_by(|a, b| a.total_cmp(b));
-            assert_eq!(brute, bvh.intersect(&ray, f32::INFINITY).map(|h| h.t));
-            assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
+        for backend in backends() {
+            let bvh = Bvh::build_with(prims.clone(), backend);
+            if let Accel::Own(nodes) = &bvh.accel {
+                let d = depth(nodes, 0);
+                assert!(d < STACK, "depth {d}");
+            }
+            let mut s = Sampler::new(5, Stream::Camera, 0, 0);
+            for _ in 0..500 {
+                // From below the origin outwards: the near child is always the deeper subtree, so
+                // every level pushes one entry.
+                // Towards the origin, where the smallest spheres are, passing between them.
+                let target = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 1e-30;
+                let o = Vec3A::splat(-1.0);
+                let ray = Ray::new(o, (target - o).normalize());
+                let brute = prims
+                    .iter()
+                    .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| h.0))
+                    .min_by(|a, b| a.total_cmp(b));
+                let fast = bvh.intersect(&ray, f32::INFINITY).map(|h| h.t);
+                if bvh.backend() == Backend::Own {
+                    assert_eq!(brute, fast);
+                } else {
+                    // obvhs's node test has no conservative far bound: among spheres ~1e-30
+                    // apart it can miss the nearest by an ulp of t (BVH2 does here).
+                    let (a, b) = (brute.unwrap(), fast.expect("a hit"));
+                    assert!((a - b).abs() <= 1e-4 * a, "{backend:?}: {a} vs {b}");
+                }
+                assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
+            }
         }
     }
 
     #[test]
     fn matches_brute_force() {
-        let prims = spheres(500);
-        let bvh = Bvh::build(prims.clone());
-        let mut s = Sampler::new(4, Stream::Camera, 0, 0);
-        for _ in 0..2000 {
-            let o = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 12.0 - Vec3A::ONE;
-            let ray = Ray::new(o, square_to_uniform_sphere(s.next_2d()));
-            let brute = prims
-                .iter()
-                .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| (h.0, p.shape())))
-                .min_by(|a, b| a.0.total_cmp(&b.0));
-            let fast = bvh
-                .intersect(&ray, f32::INFINITY)
-                .map(|h| (h.t, bvh.primitives()[h.prim as usize].shape()));
-            assert_eq!(brute, fast);
-            assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
+        for n in [0, 1, 2, 3, 500] {
+            for backend in backends() {
+                let prims = spheres(n);
+                let bvh = Bvh::build_with(prims.clone(), backend);
+                let mut s = Sampler::new(4, Stream::Camera, 0, 0);
+                for _ in 0..2000 {
+                    let o = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 12.0 - Vec3A::ONE;
+                    let ray = Ray::new(o, square_to_uniform_sphere(s.next_2d()));
+                    let brute = prims
+                        .iter()
+                        .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| (h.0, p.shape())))
+                        .min_by(|a, b| a.0.total_cmp(&b.0));
+                    let fast = bvh
+                        .intersect(&ray, f32::INFINITY)
+                        .map(|h| (h.t, bvh.primitives()[h.prim as usize].shape()));
+                    assert_eq!(brute, fast, "{backend:?}, {n} spheres");
+                    assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
+                    // Shadow-ray range: a hit must lie in (0, t_max).
+                    let t_max = 5.0;
+                    let brute_short = brute.is_some_and(|h| h.0 < t_max);
+                    assert_eq!(bvh.occluded(&ray, t_max), brute_short, "{backend:?}");
+                }
+            }
         }
     }
 }

@@ -8,7 +8,7 @@ mod sphere;
 mod triangle;
 
 pub use aabb::Aabb;
-pub use bvh::Bvh;
+pub use bvh::{Backend, Bvh};
 pub use frame::Frame;
 pub use ray::{Ray, offset_ray_origin};
 pub use sphere::Sphere;
