@@ -268,7 +268,7 @@ mod tests {
         // Even passes are 1, odd ones 3 (in one channel of three): the halves' means differ
         // by 2, so the estimate is 2² · We·Wo / W² / 3: 1/3 with equal halves, 8/27 with two
         // even passes and one odd.
-        for pass in [1u64, 0, 3, 2] {
+        for pass in [1u64, 0, 2, 3] {
             let v = if pass % 2 == 0 { 1 } else { 3 };
             points.extend(a.add(pass, part(v << 24, 1), None).unwrap().noise);
         }

@@ -112,7 +112,7 @@ pub fn run(args: &LoadgenArgs) -> anyhow::Result<()> {
 }
 
 /// The scene file of the simulated job at `width` × `height`.
-fn scene_xml(width: u32, height: u32) -> String {
+pub fn scene_xml(width: u32, height: u32) -> String {
     SCENE
         .replace(
             "<integer name=\"width\" value=\"$res\"/>",

@@ -52,7 +52,7 @@ impl Default for SchedulerConfig {
 
 /// Result pixels per second one coordinator core absorbs, from the load benchmark
 /// (docs/scaling.md), with a margin.
-pub const DEFAULT_ABSORB_PIXELS_PER_S: f64 = 100e6;
+pub const DEFAULT_ABSORB_PIXELS_PER_S: f64 = 20e6;
 
 /// A job's lifecycle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
