@@ -26,7 +26,7 @@ run() {
         via="$via${via:+,}$(sed -n 's/listening on //p' "$work/relay$i.out")"
     done
     echo "== $name (serve $serve_flags; relays $relays)"
-    taskset -c 1 "$bin" loadgen --coordinator "$url" ${via:+--via "$via"} --coordinator-pid "$pid" $load_flags 2>/dev/null
+    timeout 900 taskset -c 1 "$bin" loadgen --coordinator "$url" ${via:+--via "$via"} --coordinator-pid "$pid" $load_flags 2>/dev/null
     kill "$pid" "${rpids[@]}" 2>/dev/null || true
     wait "$pid" "${rpids[@]}" 2>/dev/null || true
 }

@@ -94,7 +94,11 @@ pub fn max_compressed(max: u64) -> u64 {
 
 /// Decodes `bytes` sent with `encoding`, refusing (without allocating for it) a body that
 /// expands beyond `max` bytes.
-pub fn decompress_bounded(encoding: Encoding, bytes: &[u8], max: u64) -> Result<Cow<'_, [u8]>, CompressionError> {
+pub fn decompress_bounded(
+    encoding: Encoding,
+    bytes: &[u8],
+    max: u64,
+) -> Result<Cow<'_, [u8]>, CompressionError> {
     match encoding {
         Encoding::Identity if bytes.len() as u64 > max => Err(CompressionError::TooLarge(max)),
         Encoding::Identity => Ok(Cow::Borrowed(bytes)),
@@ -165,7 +169,10 @@ mod tests {
     fn parses_content_encoding() {
         assert_eq!(Encoding::from_header(None).unwrap(), Encoding::Identity);
         assert_eq!(Encoding::from_header(Some(" ZSTD ")).unwrap(), Encoding::Zstd);
-        assert_eq!(Encoding::from_header(Some("identity")).unwrap(), Encoding::Identity);
+        assert_eq!(
+            Encoding::from_header(Some("identity")).unwrap(),
+            Encoding::Identity
+        );
         assert!(Encoding::from_header(Some("gzip")).is_err());
         assert_eq!(Encoding::Zstd.header(), Some("zstd"));
     }

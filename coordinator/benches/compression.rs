@@ -37,7 +37,11 @@ fn main() {
         for passes in [1u64, 16] {
             let plain = synthetic.encoded(passes, passes / 2, 3);
             let mb = plain.len() as f64 / 1e6;
-            println!("{w}x{h}, {passes} passes: PFBATCH2 {:.2} MB ({:.2} B/pixel)", mb, plain.len() as f64 / (w * h) as f64);
+            println!(
+                "{w}x{h}, {passes} passes: PFBATCH2 {:.2} MB ({:.2} B/pixel)",
+                mb,
+                plain.len() as f64 / (w * h) as f64
+            );
             for level in [1, 3] {
                 let z = zstd::bulk::compress(&plain, level).unwrap();
                 let c = median(|| timed(|| drop(zstd::bulk::compress(&plain, level).unwrap())));
@@ -65,7 +69,8 @@ fn main() {
             let d = median(|| {
                 timed(|| {
                     let mut out = Vec::new();
-                    std::io::Read::read_to_end(&mut lz4_flex::frame::FrameDecoder::new(&lz[..]), &mut out).unwrap();
+                    std::io::Read::read_to_end(&mut lz4_flex::frame::FrameDecoder::new(&lz[..]), &mut out)
+                        .unwrap();
                 })
             });
             println!(
@@ -79,7 +84,11 @@ fn main() {
             let r = decode_result(&plain).unwrap();
             let mut acc = r.sum.clone();
             let add = median(|| timed(|| acc.add(&r.sum).unwrap()));
-            println!("  decode (bincode) {:.1} ms, add to a sum {:.1} ms", dec * 1e3, add * 1e3);
+            println!(
+                "  decode (bincode) {:.1} ms, add to a sum {:.1} ms",
+                dec * 1e3,
+                add * 1e3
+            );
         }
     }
 }

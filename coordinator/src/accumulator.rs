@@ -242,7 +242,13 @@ mod tests {
     #[test]
     fn waiting_results_are_summed_per_window_and_merge_exactly() {
         let mut a = Accumulator::empty(1, 1, 8);
-        for (start, passes, v) in [(5u64, 2u64, 50i64), (2, 1, 20), (9, 1, 90), (7, 1, 70), (3, 2, 30)] {
+        for (start, passes, v) in [
+            (5u64, 2u64, 50i64),
+            (2, 1, 20),
+            (9, 1, 90),
+            (7, 1, 70),
+            (3, 2, 30),
+        ] {
             let m = a.add(start, part(v, passes), None).unwrap();
             assert!(!m.moved);
         }

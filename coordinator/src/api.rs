@@ -590,8 +590,12 @@ async fn result(
 ) -> ApiResult<Response> {
     let id = parse_id(&id)?;
     let key = lease_key(&headers);
-    let encoding = Encoding::from_header(headers.get(header::CONTENT_ENCODING).and_then(|v| v.to_str().ok()))
-        .map_err(|e| ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
+    let encoding = Encoding::from_header(
+        headers
+            .get(header::CONTENT_ENCODING)
+            .and_then(|v| v.to_str().ok()),
+    )
+    .map_err(|e| ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     // Refuse a dead lease, or one of another worker, before reading a large body.
     let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
     let max = max_encoded_batch(expected.width, expected.height);

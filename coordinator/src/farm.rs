@@ -463,9 +463,13 @@ impl Farm {
     }
 
     /// Image size and pass range a lease's result must have (checked before reading it).
-    pub fn expected_result(&self, lease_id: u64, key: &str) -> Result<Expected, FarmError> {
+    /// Also notes the result's arrival, to measure the worker's speed without the time its
+    /// upload waits for the coordinator.
+    pub fn expected_result(&mut self, lease_id: u64, key: &str) -> Result<Expected, FarmError> {
         self.check_key(lease_id, key)?;
-        let g = self.scheduler.lease_range(lease_id, self.now())?;
+        let now = self.now();
+        let g = self.scheduler.lease_range(lease_id, now)?;
+        self.scheduler.arriving(lease_id, now);
         let job = &self.jobs[&g.job_id];
         Ok(Expected {
             job: g.job_id,

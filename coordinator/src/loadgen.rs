@@ -86,7 +86,11 @@ impl Shared {
             .get_or_try_init(|| async move {
                 tokio::task::spawn_blocking(move || {
                     let plain = me.synthetic.encoded(passes, odd, passes * 7919 + odd);
-                    Bytes::from(if compress { compression::compress(&plain) } else { plain })
+                    Bytes::from(if compress {
+                        compression::compress(&plain)
+                    } else {
+                        plain
+                    })
                 })
                 .await
             })
@@ -151,7 +155,10 @@ async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
     let dir = tempfile_dir()?;
     let path = dir.join("scene.xml");
     std::fs::write(&path, &xml)?;
-    eprintln!("rendering two real passes at {}x{} for the results' content...", args.width, args.height);
+    eprintln!(
+        "rendering two real passes at {}x{} for the results' content...",
+        args.width, args.height
+    );
     let synthetic = tokio::task::spawn_blocking(move || -> anyhow::Result<Synthetic> {
         let scene = photonfarm::scene::Scene::load(&path, &[])?;
         Ok(Synthetic::render(&scene))
@@ -172,7 +179,11 @@ async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
         token: args.worker_token.clone().or_else(|| args.token.clone()),
         synthetic,
         bodies: Mutex::default(),
-        encoding: if args.identity { Encoding::Identity } else { Encoding::Zstd },
+        encoding: if args.identity {
+            Encoding::Identity
+        } else {
+            Encoding::Zstd
+        },
         pass_s: args.pass_seconds,
         fanout: args.fanout,
         measuring: AtomicBool::new(false),
@@ -186,7 +197,9 @@ async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
     };
     let mut tasks = Vec::new();
     for i in 0..clients {
-        let base = targets[i as usize % targets.len()].trim_end_matches('/').to_string();
+        let base = targets[i as usize % targets.len()]
+            .trim_end_matches('/')
+            .to_string();
         let shared = shared.clone();
         // Spread the starts over a second, as workers starting at once would not be.
         let delay = Duration::from_millis((i as u64 * 1000) / clients as u64);
@@ -207,7 +220,10 @@ async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
     for t in tasks {
         t.abort();
     }
-    let status = ApiClient::new(&args.coordinator, args.token.clone()).cancel(job).await.ok();
+    let status = ApiClient::new(&args.coordinator, args.token.clone())
+        .cancel(job)
+        .await
+        .ok();
     let tally = std::mem::take(&mut *shared.tally.lock().unwrap_or_else(|p| p.into_inner()));
     let cpu = cpu0.zip(cpu1).map(|(a, b)| b - a);
     report(args, clients, window, &tally, cpu, status.as_ref());
@@ -249,7 +265,11 @@ fn report(
     let mut lease = t.lease_lat.clone();
     let mut upload = t.upload_lat.clone();
     let busy = t.render_s + t.lease_s + t.upload_s;
-    let waiting = if busy > 0.0 { (t.lease_s + t.upload_s) / busy } else { 0.0 };
+    let waiting = if busy > 0.0 {
+        (t.lease_s + t.upload_s) / busy
+    } else {
+        0.0
+    };
     println!(
         "{}x{} workers={} clients={} fanout={} pass_s={} encoding={}",
         args.width,
@@ -333,16 +353,23 @@ async fn simulate(shared: Arc<Shared>, base: String, name: String) {
         let passes = lease.end - lease.start;
         let odd = lease.end / 2 - lease.start / 2;
         let render = Duration::from_secs_f64(passes as f64 * shared.pass_s / shared.fanout as f64);
-        let compress = shared.encoding == Encoding::Zstd && lease.accept_encoding.iter().any(|e| e == compression::ZSTD);
+        let compress =
+            shared.encoding == Encoding::Zstd && lease.accept_encoding.iter().any(|e| e == compression::ZSTD);
         // The body is made while "rendering" (and only once per pass count).
-        let (body, ()) = tokio::join!(shared.body(passes, odd, compress), wait_rendering(&shared, &base, &lease, render));
+        let (body, ()) = tokio::join!(
+            shared.body(passes, odd, compress),
+            wait_rendering(&shared, &base, &lease, render)
+        );
         let Ok(body) = body else {
             shared.count(|t| t.errors += 1);
             continue;
         };
         let started = Instant::now();
         let mut put = shared
-            .req(reqwest::Method::PUT, format!("{base}/api/leases/{}/result", lease.lease_id))
+            .req(
+                reqwest::Method::PUT,
+                format!("{base}/api/leases/{}/result", lease.lease_id),
+            )
             .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
             .header(LEASE_KEY_HEADER, &lease.key);
         if compress {
@@ -389,7 +416,10 @@ async fn wait_rendering(shared: &Shared, base: &str, lease: &Lease, render: Dura
         tokio::time::sleep(left.min(every)).await;
         if Instant::now() < until {
             let _ = shared
-                .req(reqwest::Method::POST, format!("{base}/api/leases/{}/heartbeat", lease.lease_id))
+                .req(
+                    reqwest::Method::POST,
+                    format!("{base}/api/leases/{}/heartbeat", lease.lease_id),
+                )
                 .header(LEASE_KEY_HEADER, &lease.key)
                 .send()
                 .await;

@@ -133,6 +133,10 @@ struct LeaseInfo {
     worker: String,
     issued: Millis,
     deadline: Millis,
+    /// When its result started to arrive: the worker's speed is measured to then, not to
+    /// the end of an upload that queued behind others (a busy coordinator would otherwise
+    /// measure workers slower, shorten their batches and get busier).
+    arrived: Option<Millis>,
 }
 
 #[derive(Clone, Debug)]
@@ -282,6 +286,7 @@ impl Scheduler {
                     worker: worker.to_string(),
                     issued: now,
                     deadline: now + config.lease_timeout_ms,
+                    arrived: None,
                 },
             );
             return Some(Grant {
@@ -328,6 +333,7 @@ impl Scheduler {
                 worker: worker.to_string(),
                 issued: deadline.saturating_sub(self.config.lease_timeout_ms),
                 deadline,
+                arrived: None,
             },
         );
         true
@@ -369,13 +375,20 @@ impl Scheduler {
         })
     }
 
+    /// Notes that a lease's result started to arrive (its worker's speed is measured to then).
+    pub fn arriving(&mut self, lease_id: u64, now: Millis) {
+        if let Some(l) = self.leases.get_mut(&lease_id) {
+            l.arrived.get_or_insert(now);
+        }
+    }
+
     /// Accepts a lease's result: the lease ends, its passes count once. Returns the range.
     pub fn complete(&mut self, lease_id: u64, now: Millis) -> Result<Grant, LeaseError> {
         let grant = self.lease_range(lease_id, now)?;
         let lease = self.leases.remove(&lease_id).expect("checked above");
         let job = self.jobs.get_mut(&lease.job).expect("a lease's job exists");
         job.completed += lease.end - lease.start;
-        let elapsed = (now.saturating_sub(lease.issued)).max(1) as f64;
+        let elapsed = (lease.arrived.unwrap_or(now).saturating_sub(lease.issued)).max(1) as f64;
         job.rates
             .insert(lease.worker, (lease.end - lease.start) as f64 / elapsed);
         if job.completed >= job.total {

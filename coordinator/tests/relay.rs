@@ -33,7 +33,15 @@ const JOB: &[&str] = &[
 
 fn relay(upstream: &str) -> (Proc, String) {
     let mut child = Command::new(coordinator_bin())
-        .args(["relay", "--upstream", upstream, "--bind", "127.0.0.1:0", "--name", "relay-a"])
+        .args([
+            "relay",
+            "--upstream",
+            upstream,
+            "--bind",
+            "127.0.0.1:0",
+            "--name",
+            "relay-a",
+        ])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -74,16 +82,29 @@ fn two_workers_behind_a_relay_give_the_bytes_of_a_local_render() {
     let scene = scene();
     let scene = scene.to_str().unwrap();
     let local = dir.path().join("local.exr");
-    run(&[&["render", scene, "--out", local.to_str().unwrap()], JOB].concat(), dir.path());
+    run(
+        &[&["render", scene, "--out", local.to_str().unwrap()], JOB].concat(),
+        dir.path(),
+    );
 
-    let (_serve, url) = support::serve(&dir.path().join("data"), "127.0.0.1:0", &["--batch-seconds", "0.5"], &[]);
+    let (_serve, url) = support::serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "0.5"],
+        &[],
+    );
     let (_relay, relay_url) = relay(&url);
     let _workers: Vec<Proc> = (0..2)
         .map(|i| worker(&relay_url, &format!("w{i}"), dir.path()))
         .collect();
     let farm = dir.path().join("farm.exr");
     let o = run(
-        &[&["submit", "--to", &url, scene], JOB, &["--wait", "--out", farm.to_str().unwrap()]].concat(),
+        &[
+            &["submit", "--to", &url, scene],
+            JOB,
+            &["--wait", "--out", farm.to_str().unwrap()],
+        ]
+        .concat(),
         dir.path(),
     );
     let id: u64 = String::from_utf8_lossy(&o.stdout).trim().parse().unwrap();

@@ -63,7 +63,12 @@ impl BatchSum {
     /// Adds a part's sum of passes [start, start + sum.passes) with its odd passes' sample
     /// (None: not sent; a one-pass part's is known from its parity). Returns whether the batch
     /// is complete.
-    pub fn add(&mut self, start: u64, sum: FilmSum, odd: Option<OddSums>) -> Result<bool, photonfarm::film::FilmError> {
+    pub fn add(
+        &mut self,
+        start: u64,
+        sum: FilmSum,
+        odd: Option<OddSums>,
+    ) -> Result<bool, photonfarm::film::FilmError> {
         let odd = odd.or_else(|| match sum.passes {
             1 if start % 2 == 1 => Some(OddSums::of(&sum)),
             1 => Some(OddSums::empty(sum.width, sum.height)),
@@ -381,13 +386,20 @@ mod tests {
         }
         let ranges: Vec<(u64, u64)> = parts.iter().map(|l| (l.start, l.end)).collect();
         assert_eq!(ranges, vec![(10, 13), (13, 16), (16, 17)]);
-        assert_eq!(book.deliver(parts[0].lease_id, "wrong").err(), Some(PartError::NotYours(parts[0].lease_id)));
+        assert_eq!(
+            book.deliver(parts[0].lease_id, "wrong").err(),
+            Some(PartError::NotYours(parts[0].lease_id))
+        );
         let mut complete = false;
         for l in parts.iter().rev() {
             let sum = book.deliver(l.lease_id, &l.key).unwrap();
             let mut odd = OddSums::empty(2, 1);
             odd.passes = l.end / 2 - l.start / 2;
-            complete = sum.lock().unwrap().add(l.start, film(l.start, l.end), Some(odd)).unwrap();
+            complete = sum
+                .lock()
+                .unwrap()
+                .add(l.start, film(l.start, l.end), Some(odd))
+                .unwrap();
         }
         assert!(complete);
         let sum = book.batches[&7].sum.lock().unwrap();
@@ -406,7 +418,10 @@ mod tests {
         assert_eq!(book.heartbeat(a.lease_id, "ka", 500), Ok(1000));
         assert_eq!(book.expire(1400), 0);
         assert_eq!(book.expire(1501), 1);
-        assert_eq!(book.heartbeat(a.lease_id, "ka", 1502), Err(PartError::NotActive(a.lease_id)));
+        assert_eq!(
+            book.heartbeat(a.lease_id, "ka", 1502),
+            Err(PartError::NotActive(a.lease_id))
+        );
         for k in 0..3 {
             let p = book.take(format!("f{k}"), 2000).unwrap();
             assert_eq!((p.start, p.end), (0, 4), "the same passes again");
@@ -418,7 +433,10 @@ mod tests {
         book.add_batch(upstream(2, 0, 2));
         let p = book.take("k".into(), 0).unwrap();
         book.finish(2);
-        assert_eq!(book.heartbeat(p.lease_id, "k", 1), Err(PartError::NotActive(p.lease_id)));
+        assert_eq!(
+            book.heartbeat(p.lease_id, "k", 1),
+            Err(PartError::NotActive(p.lease_id))
+        );
     }
 
     #[test]

@@ -28,8 +28,8 @@ use axum::routing::{get, post, put};
 use axum::{Json, Router};
 use photonfarm::compression::{self, CompressionError, Encoding};
 use photonfarm::protocol::{
-    HeartbeatReply, LEASE_KEY_HEADER, Lease, LeaseRequest, Release, decode_result, encode_batch, encode_result,
-    max_encoded_batch,
+    HeartbeatReply, LEASE_KEY_HEADER, Lease, LeaseRequest, Release, decode_result, encode_batch,
+    encode_result, max_encoded_batch,
 };
 use serde_json::json;
 use sha2::{Digest, Sha256};
@@ -166,7 +166,8 @@ async fn auth(State(relay): State<Arc<Relay>>, req: Request, next: axum::middlew
             .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
             .map_or("", |(_, t)| t.trim());
         if Sha256::digest(given.as_bytes()) != Sha256::digest(want.as_bytes()) {
-            return RelayError(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into()).into_response();
+            return RelayError(StatusCode::UNAUTHORIZED, "missing or wrong bearer token".into())
+                .into_response();
         }
     }
     next.run(req).await
@@ -214,7 +215,13 @@ async fn lease(State(relay): State<Arc<Relay>>, body: Bytes) -> RelayResult<Resp
         StatusCode::NO_CONTENT => Ok(StatusCode::NO_CONTENT.into_response()),
         s if s.is_success() => {
             let up: Lease = resp.json().await.map_err(bad_gateway)?;
-            tracing::info!(lease = up.lease_id, job = up.job_id, start = up.start, end = up.end, "leased upstream");
+            tracing::info!(
+                lease = up.lease_id,
+                job = up.job_id,
+                start = up.start,
+                end = up.end,
+                "leased upstream"
+            );
             let mut book = relay.book();
             book.add_batch(up);
             match book.take(relay.new_key(), relay.now()) {
@@ -222,7 +229,10 @@ async fn lease(State(relay): State<Arc<Relay>>, body: Bytes) -> RelayResult<Resp
                 None => Ok(StatusCode::NO_CONTENT.into_response()),
             }
         }
-        s => Err(bad_gateway(format!("{s} {}", resp.text().await.unwrap_or_default()))),
+        s => Err(bad_gateway(format!(
+            "{s} {}",
+            resp.text().await.unwrap_or_default()
+        ))),
     }
 }
 
@@ -245,11 +255,19 @@ async fn release(
     let id = parse_id(&id)?;
     let r: Release = serde_json::from_slice(&body)
         .map_err(|e| RelayError(StatusCode::BAD_REQUEST, format!("malformed JSON: {e}")))?;
-    let given_up = relay.book().release(id, &lease_key(&headers), r.error.is_some())?;
+    let given_up = relay
+        .book()
+        .release(id, &lease_key(&headers), r.error.is_some())?;
     if let Some(up) = given_up {
-        tracing::warn!(lease = up.lease_id, "a batch failed on local workers; giving it up upstream");
+        tracing::warn!(
+            lease = up.lease_id,
+            "a batch failed on local workers; giving it up upstream"
+        );
         let _ = relay
-            .up(reqwest::Method::POST, &format!("/api/leases/{}/release", up.lease_id))
+            .up(
+                reqwest::Method::POST,
+                &format!("/api/leases/{}/release", up.lease_id),
+            )
             .header(LEASE_KEY_HEADER, &up.key)
             .json(&r)
             .send()
@@ -268,8 +286,12 @@ async fn result(
 ) -> RelayResult<Response> {
     let id = parse_id(&id)?;
     let key = lease_key(&headers);
-    let encoding = Encoding::from_header(headers.get(header::CONTENT_ENCODING).and_then(|v| v.to_str().ok()))
-        .map_err(|e| RelayError(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
+    let encoding = Encoding::from_header(
+        headers
+            .get(header::CONTENT_ENCODING)
+            .and_then(|v| v.to_str().ok()),
+    )
+    .map_err(|e| RelayError(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     let info = relay.book().expected(id, &key)?;
     let max = if info.width == 0 {
         UNKNOWN_SIZE_MAX
@@ -280,7 +302,12 @@ async fn result(
         Encoding::Identity => max,
         Encoding::Zstd => compression::max_compressed(max),
     };
-    let too_large = || RelayError(StatusCode::PAYLOAD_TOO_LARGE, format!("a result for lease {id} is at most {max} bytes"));
+    let too_large = || {
+        RelayError(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("a result for lease {id} is at most {max} bytes"),
+        )
+    };
     let declared = headers
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
@@ -300,7 +327,9 @@ async fn result(
     .map_err(bad_gateway)?;
     let r = match decoded {
         Ok(r) => r,
-        Err(e @ CompressionError::TooLarge(_)) => return Err(RelayError(StatusCode::PAYLOAD_TOO_LARGE, e.to_string())),
+        Err(e @ CompressionError::TooLarge(_)) => {
+            return Err(RelayError(StatusCode::PAYLOAD_TOO_LARGE, e.to_string()));
+        }
         Err(e) => return Err(RelayError(StatusCode::BAD_REQUEST, e.to_string())),
     };
     let passes = info.end - info.start;
@@ -348,7 +377,11 @@ async fn forward(relay: Arc<Relay>, lease: Lease) {
             Some(odd) => encode_result(film, odd),
             None => encode_batch(film),
         };
-        Some(Bytes::from(if compress { compression::compress(&plain) } else { plain }))
+        Some(Bytes::from(if compress {
+            compression::compress(&plain)
+        } else {
+            plain
+        }))
     })
     .await
     .ok()
@@ -360,7 +393,10 @@ async fn forward(relay: Arc<Relay>, lease: Lease) {
     let mut backoff = Duration::from_millis(200);
     loop {
         let mut put = relay
-            .up(reqwest::Method::PUT, &format!("/api/leases/{}/result", lease.lease_id))
+            .up(
+                reqwest::Method::PUT,
+                &format!("/api/leases/{}/result", lease.lease_id),
+            )
             .header(header::CONTENT_TYPE, "application/octet-stream")
             .header(LEASE_KEY_HEADER, &lease.key);
         if compress {
@@ -368,15 +404,28 @@ async fn forward(relay: Arc<Relay>, lease: Lease) {
         }
         match put.body(body.clone()).send().await {
             Ok(r) if r.status().is_success() => {
-                tracing::info!(lease = lease.lease_id, start = lease.start, end = lease.end, "batch forwarded");
+                tracing::info!(
+                    lease = lease.lease_id,
+                    start = lease.start,
+                    end = lease.end,
+                    "batch forwarded"
+                );
                 break;
             }
             Ok(r) if !r.status().is_server_error() => {
                 let s = r.status();
-                tracing::warn!(lease = lease.lease_id, "upstream refused the batch: {s} {}", r.text().await.unwrap_or_default());
+                tracing::warn!(
+                    lease = lease.lease_id,
+                    "upstream refused the batch: {s} {}",
+                    r.text().await.unwrap_or_default()
+                );
                 break;
             }
-            Ok(r) => tracing::warn!(lease = lease.lease_id, "upstream failed: {}; retrying", r.status()),
+            Ok(r) => tracing::warn!(
+                lease = lease.lease_id,
+                "upstream failed: {}; retrying",
+                r.status()
+            ),
             Err(e) => tracing::warn!(lease = lease.lease_id, "upstream unreachable: {e}; retrying"),
         }
         tokio::time::sleep(backoff).await;
@@ -406,7 +455,11 @@ async fn bundle(State(relay): State<Arc<Relay>>, Path(hash): Path<String>) -> Re
             Err(e) => Some((Err(e), r)),
         }
     });
-    Ok(([(header::CONTENT_TYPE, "application/x-tar")], Body::from_stream(stream)).into_response())
+    Ok((
+        [(header::CONTENT_TYPE, "application/x-tar")],
+        Body::from_stream(stream),
+    )
+        .into_response())
 }
 
 /// Heartbeats every upstream batch held; a batch the upstream no longer holds is forgotten
@@ -424,7 +477,10 @@ async fn upkeep(relay: Arc<Relay>, every: Duration) {
                 .send()
                 .await;
             if let Ok(r) = r
-                && matches!(r.status(), StatusCode::CONFLICT | StatusCode::GONE | StatusCode::FORBIDDEN)
+                && matches!(
+                    r.status(),
+                    StatusCode::CONFLICT | StatusCode::GONE | StatusCode::FORBIDDEN
+                )
             {
                 tracing::warn!(lease = id, "the upstream no longer holds this batch; dropping it");
                 relay.book().finish(id);
@@ -442,7 +498,9 @@ pub async fn serve(
     // Upstream leases are heartbeated well within the coordinator's 30 s default timeout.
     let keep = tokio::spawn(upkeep(relay.clone(), Duration::from_secs(5)));
     println!("listening on http://{}", listener.local_addr()?);
-    axum::serve(listener, router(relay)).with_graceful_shutdown(shutdown).await?;
+    axum::serve(listener, router(relay))
+        .with_graceful_shutdown(shutdown)
+        .await?;
     keep.abort();
     Ok(())
 }
@@ -460,7 +518,11 @@ pub fn run(args: &RelayArgs) -> anyhow::Result<()> {
     });
     let relay = Relay::new(RelayConfig {
         upstream: args.upstream.clone(),
-        local_token: args.local_token.clone().filter(|t| !t.is_empty()).or_else(|| token.clone()),
+        local_token: args
+            .local_token
+            .clone()
+            .filter(|t| !t.is_empty())
+            .or_else(|| token.clone()),
         token,
         name,
         lease_timeout_ms: (args.lease_timeout * 1000.0) as u64,
