@@ -15,20 +15,12 @@ fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
 }
 
-fn get(url: &str) -> reqwest::Response {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async { reqwest::get(url).await.unwrap() })
-}
-
 fn text(url: &str) -> String {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
-    rt.block_on(async { get(url).text().await.unwrap() })
+    rt.block_on(async { reqwest::get(url).await.unwrap().text().await.unwrap() })
 }
 
 #[test]
