@@ -8,6 +8,7 @@ pub mod bsdf;
 pub mod bundle;
 pub mod camera;
 pub mod color;
+pub mod compression;
 pub mod film;
 pub mod filter;
 pub mod geometry;

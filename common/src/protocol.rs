@@ -18,6 +18,11 @@ pub struct LeaseRequest {
     pub worker: String,
     /// Threads it renders with (a hint for the batch size).
     pub threads: u32,
+    /// How many machines render what this client leases: a relay (`coordinator relay`) leases
+    /// for all its workers, so its first batch has one pass for each of them. None (one) for a
+    /// worker; omitted on the wire then, so older coordinators accept the request.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub renderers: Option<u32>,
 }
 
 /// A batch of passes lent to a worker until `deadline_ms` from now, renewable by heartbeats.
@@ -50,6 +55,17 @@ pub struct Lease {
     /// The lease's secret: heartbeats, the result and the release must carry it (header
     /// [`LEASE_KEY_HEADER`]), so that only the worker granted the lease can use it.
     pub key: String,
+    /// The `Content-Encoding`s the coordinator accepts for the result (`zstd`); empty from an
+    /// older coordinator, which takes results uncompressed only.
+    #[serde(default)]
+    pub accept_encoding: Vec<String>,
+    /// The image's width and height (0 from an older coordinator): a relay bounds its
+    /// workers' results by them before reading them.
+    #[serde(default)]
+    pub width: u32,
+    /// See `width`.
+    #[serde(default)]
+    pub height: u32,
 }
 
 /// The header that carries a lease's secret.

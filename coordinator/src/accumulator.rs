@@ -2,6 +2,11 @@
 //! image of passes [0, N): byte-identical whichever workers rendered them and in whatever order
 //! they arrived.
 //!
+//! Results that arrive ahead of a gap wait, summed per checkpoint window: exact integer
+//! addition does not depend on order, and one sum per window (not one per result) bounds the
+//! memory a job takes however many workers deliver out of order (a 1920×1080 sum is 50 MB, and
+//! a thousand workers' results arrive in any order).
+//!
 //! Beside the prefix it sums the prefix's odd passes on the sampled pixels
 //! ([`photonfarm::parity`]), and estimates the image's noise from them as the prefix grows.
 
@@ -18,12 +23,39 @@ pub struct Accumulator {
     /// The prefix's odd passes on the sampled pixels; None once a result without them (from
     /// an older worker) was merged: the job then has no noise estimate.
     odd: Option<OddSums>,
-    /// Results that arrived ahead of a gap, by first pass.
-    pending: BTreeMap<u64, (FilmSum, Option<OddSums>)>,
+    /// Results that arrived ahead of a gap, summed per checkpoint window (by window index).
+    pending: BTreeMap<u64, Waiting>,
     /// Checkpoints fall on multiples of this.
     checkpoint_every: u64,
     /// Passes at the latest noise estimate reported.
     noise_passes: u64,
+}
+
+/// The results of one checkpoint window that wait for a gap before them to be filled.
+#[derive(Debug)]
+struct Waiting {
+    /// Their sum.
+    sum: FilmSum,
+    /// Their odd passes' sample; None if one of them came without it.
+    odd: Option<OddSums>,
+    /// Their pass ranges, by first pass (never overlapping: each pass is leased once at a time
+    /// and counted once).
+    ranges: BTreeMap<u64, u64>,
+}
+
+impl Waiting {
+    /// Whether the ranges are one run starting at `from`: then the sum is exactly the passes
+    /// [from, end) and may join the prefix.
+    fn run_from(&self, from: u64) -> Option<u64> {
+        let mut at = from;
+        for (&s, &e) in &self.ranges {
+            if s != at {
+                return None;
+            }
+            at = e;
+        }
+        Some(at)
+    }
 }
 
 /// What merging a result did.
@@ -109,10 +141,40 @@ impl Accumulator {
             1 => Some(OddSums::empty(sum.width, sum.height)),
             _ => None,
         });
-        self.pending.insert(start, (sum, odd));
-        while let Some((next, next_odd)) = self.pending.remove(&self.prefix.passes) {
-            self.prefix.add(&next)?;
-            self.odd = match (self.odd.take(), next_odd) {
+        let end = start + sum.passes;
+        match self.pending.entry(start / self.checkpoint_every) {
+            std::collections::btree_map::Entry::Vacant(v) => {
+                v.insert(Waiting {
+                    sum,
+                    odd,
+                    ranges: BTreeMap::from([(start, end)]),
+                });
+            }
+            std::collections::btree_map::Entry::Occupied(mut o) => {
+                let w = o.get_mut();
+                w.sum.add(&sum)?;
+                w.odd = match (w.odd.take(), odd) {
+                    (Some(mut mine), Some(theirs)) => {
+                        mine.add(&theirs);
+                        Some(mine)
+                    }
+                    _ => None,
+                };
+                w.ranges.insert(start, end);
+            }
+        }
+        loop {
+            let window = self.prefix.passes / self.checkpoint_every;
+            let ready = self
+                .pending
+                .get(&window)
+                .is_some_and(|w| w.run_from(self.prefix.passes).is_some());
+            if !ready {
+                break;
+            }
+            let next = self.pending.remove(&window).expect("checked above");
+            self.prefix.add(&next.sum)?;
+            self.odd = match (self.odd.take(), next.odd) {
                 (Some(mut mine), Some(theirs)) => {
                     mine.add(&theirs);
                     Some(mine)
@@ -138,8 +200,8 @@ impl Accumulator {
     /// Ranges of results held ahead of a gap.
     pub fn pending_ranges(&self) -> Vec<(u64, u64)> {
         self.pending
-            .iter()
-            .map(|(&s, (f, _))| (s, s + f.passes))
+            .values()
+            .flat_map(|w| w.ranges.iter().map(|(&s, &e)| (s, e)))
             .collect()
     }
 }
@@ -175,6 +237,35 @@ mod tests {
         );
     }
 
+    /// Results ahead of a gap are summed per window: one sum in memory per window, and the
+    /// prefix is the same integers as adding in pass order.
+    #[test]
+    fn waiting_results_are_summed_per_window_and_merge_exactly() {
+        let mut a = Accumulator::empty(1, 1, 8);
+        for (start, passes, v) in [
+            (5u64, 2u64, 50i64),
+            (2, 1, 20),
+            (9, 1, 90),
+            (7, 1, 70),
+            (3, 2, 30),
+        ] {
+            let m = a.add(start, part(v, passes), None).unwrap();
+            assert!(!m.moved);
+        }
+        // Window 0 holds 2..5, 5..7, 7..8 in one sum; window 1 holds 9..10.
+        assert_eq!(a.pending.len(), 2);
+        assert_eq!(a.pending_ranges(), vec![(2, 3), (3, 5), (5, 7), (7, 8), (9, 10)]);
+        let m = a.add(0, part(1, 2), None).unwrap();
+        assert!(m.moved);
+        assert_eq!(a.prefix_passes(), 8);
+        assert_eq!(a.prefix().sums[0][0], 1 + 20 + 30 + 50 + 70);
+        assert_eq!(m.checkpoints.len(), 1);
+        a.add(8, part(80, 1), None).unwrap();
+        assert_eq!(a.prefix_passes(), 10);
+        assert_eq!(a.prefix().sums[0][0], 1 + 20 + 30 + 50 + 70 + 80 + 90);
+        assert!(a.pending_ranges().is_empty());
+    }
+
     /// One-pass results need no odd sample: their parity says which half they belong to.
     #[test]
     fn one_pass_results_estimate_noise_by_their_parity() {
@@ -183,7 +274,7 @@ mod tests {
         // Even passes are 1, odd ones 3 (in one channel of three): the halves' means differ
         // by 2, so the estimate is 2² · We·Wo / W² / 3: 1/3 with equal halves, 8/27 with two
         // even passes and one odd.
-        for pass in [1u64, 0, 3, 2] {
+        for pass in [1u64, 0, 2, 3] {
             let v = if pass % 2 == 0 { 1 } else { 3 };
             points.extend(a.add(pass, part(v << 24, 1), None).unwrap().noise);
         }

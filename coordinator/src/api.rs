@@ -17,6 +17,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post, put};
 use axum::{Json, Router};
 use photonfarm::bundle::BundleError;
+use photonfarm::compression::{self, CompressionError, Encoding};
 use photonfarm::job::JobSettings;
 use photonfarm::protocol::{LEASE_KEY_HEADER, LeaseRequest, Release, decode_result, max_encoded_batch};
 use photonfarm::render::Method;
@@ -589,9 +590,21 @@ async fn result(
 ) -> ApiResult<Response> {
     let id = parse_id(&id)?;
     let key = lease_key(&headers);
+    let encoding = Encoding::from_header(
+        headers
+            .get(header::CONTENT_ENCODING)
+            .and_then(|v| v.to_str().ok()),
+    )
+    .map_err(|e| ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     // Refuse a dead lease, or one of another worker, before reading a large body.
     let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
     let max = max_encoded_batch(expected.width, expected.height);
+    // On the wire: compressed bodies may be a little larger than their content, never more
+    // than zstd's bound; what they expand to is bounded by `max` while decompressing.
+    let wire_max = match encoding {
+        Encoding::Identity => max,
+        Encoding::Zstd => compression::max_compressed(max),
+    };
     let declared = headers
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
@@ -603,16 +616,16 @@ async fn result(
         ))
     };
     if let Some(n) = declared
-        && n > max
+        && n > wire_max
     {
         return Err(over(n.to_string()));
     }
     let _slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
-    let body = axum::body::to_bytes(req.into_body(), max as usize)
+    let body = axum::body::to_bytes(req.into_body(), wire_max as usize)
         .await
         .map_err(|_| over("larger".into()))?;
     let st = state.clone();
-    blocking(move || store_result(&st, id, &key, expected, body)).await?;
+    blocking(move || store_result(&st, id, &key, expected, encoding, body)).await?;
     Ok(Json(json!({ "accepted": true })).into_response())
 }
 
@@ -622,12 +635,27 @@ fn store_result(
     id: u64,
     key: &str,
     expected: crate::farm::Expected,
+    encoding: Encoding,
     body: Bytes,
 ) -> ApiResult<()> {
     let len = body.len() as u64;
     // Odd passes in [start, end): those the odd-pass sample, if sent, must hold.
     let odd_passes = expected.end / 2 - expected.start / 2;
-    let (sum, odd) = match decode_result(&body) {
+    let max = max_encoded_batch(expected.width, expected.height);
+    let plain = match compression::decompress_bounded(encoding, &body, max) {
+        Ok(p) => p,
+        Err(e @ CompressionError::TooLarge(_)) => {
+            return Err(too_large(format!("a result for lease {id}: {e}")));
+        }
+        Err(e) => {
+            let msg = e.to_string();
+            with_farm(state, |f| f.reject(id, &msg))?;
+            return Err(ApiError::from(FarmError::BadResult(msg)));
+        }
+    };
+    let decoded = decode_result(&plain);
+    drop(plain);
+    let (sum, odd) = match decoded {
         Ok(r)
             if (r.sum.width, r.sum.height) == (expected.width, expected.height)
                 && r.sum.passes == expected.end - expected.start
@@ -661,7 +689,7 @@ fn store_result(
             return Err(ApiError::from(FarmError::BadResult(msg)));
         }
     };
-    // The body is the batch's encoding: stored as received, then dropped.
+    // The body is the batch's encoding: stored as received (compressed or not), then dropped.
     state
         .layout
         .write_batch_bytes(expected.job, expected.start, expected.end, &body, id)

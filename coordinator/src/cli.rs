@@ -37,6 +37,12 @@ pub enum Command {
     Fetch(FetchArgs),
     /// Cancel a job.
     Cancel(JobIdArgs),
+    /// Relay for many local workers: lease from an upstream coordinator on their behalf, merge
+    /// their exact sums and forward one result per upstream batch.
+    Relay(RelayArgs),
+    /// Simulated workers against a real coordinator: measures the results and bytes per second
+    /// it takes in and how long workers wait (docs/scaling.md).
+    Loadgen(LoadgenArgs),
     /// The service's scene checker (run by `serve` in a child process).
     #[command(hide = true)]
     CheckScene(CheckSceneArgs),
@@ -434,6 +440,85 @@ pub struct ServeArgs {
     /// Checkpoint interval (passes) of jobs that do not set one.
     #[arg(long, default_value_t = 64)]
     pub checkpoint_every: u64,
+    /// Megapixels of results per second this coordinator absorbs: batches lengthen beyond
+    /// --batch-seconds so that all workers' results together stay within it (workers × image
+    /// pixels / this). 0 turns the rule off. See docs/scaling.md.
+    #[arg(long, default_value_t = crate::scheduler::DEFAULT_ABSORB_PIXELS_PER_S / 1e6)]
+    pub absorb_mpx_per_second: f64,
+}
+
+/// `coordinator relay`.
+#[derive(Debug, clap::Args)]
+pub struct RelayArgs {
+    /// The coordinator (or relay) to lease from, e.g. http://render-host:8080.
+    #[arg(long, value_name = "URL")]
+    pub upstream: String,
+    /// Address the local workers connect to.
+    #[arg(long, default_value = "127.0.0.1:8090")]
+    pub bind: String,
+    /// The upstream's workers' token.
+    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// The token the local workers must present [default: --token].
+    #[arg(long, env = "PHOTONFARM_LOCAL_TOKEN", hide_env_values = true)]
+    pub local_token: Option<String>,
+    /// This relay's name upstream [default: relay-HOST-PID].
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Seconds without a heartbeat after which a local worker's part goes to another one.
+    #[arg(long, default_value_t = 30.0)]
+    pub lease_timeout: f64,
+}
+
+/// `coordinator loadgen`.
+#[derive(Debug, clap::Args)]
+pub struct LoadgenArgs {
+    /// The coordinator to submit the simulated job to (and to lease from, without --via).
+    #[arg(long, value_name = "URL")]
+    pub coordinator: String,
+    /// Relays to lease from instead, comma-separated: the clients are spread over them.
+    #[arg(long, value_name = "URL", value_delimiter = ',')]
+    pub via: Vec<String>,
+    /// The users' token (to submit and cancel the job).
+    #[arg(long, env = "PHOTONFARM_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// The workers' token [default: --token].
+    #[arg(long, env = "PHOTONFARM_WORKER_TOKEN", hide_env_values = true)]
+    pub worker_token: Option<String>,
+    /// Simulated workers.
+    #[arg(long, default_value_t = 100)]
+    pub workers: u32,
+    /// Workers per simulated client: each client stands for a relay of this many workers
+    /// (one pass per worker at first, this many times faster).
+    #[arg(long, default_value_t = 1)]
+    pub fanout: u32,
+    /// Image width.
+    #[arg(long, default_value_t = 1920)]
+    pub width: u32,
+    /// Image height.
+    #[arg(long, default_value_t = 1080)]
+    pub height: u32,
+    /// Simulated render time of one pass on one worker, seconds.
+    #[arg(long, default_value_t = 5.0)]
+    pub pass_seconds: f64,
+    /// Seconds before measuring (batch sizes settle).
+    #[arg(long, default_value_t = 30.0)]
+    pub warmup: f64,
+    /// Seconds measured.
+    #[arg(long, default_value_t = 60.0)]
+    pub duration: f64,
+    /// Send results uncompressed, as workers before compression did.
+    #[arg(long)]
+    pub identity: bool,
+    /// Passes of the simulated job.
+    #[arg(long, default_value_t = 10_000_000)]
+    pub passes: u64,
+    /// Checkpoint interval of the simulated job, passes.
+    #[arg(long, default_value_t = 1024)]
+    pub checkpoint_every: u64,
+    /// The coordinator's process id, to report its CPU time per result (same machine).
+    #[arg(long)]
+    pub coordinator_pid: Option<u32>,
 }
 
 /// `coordinator submit`.
@@ -472,6 +557,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Wait(a) => crate::client::run_job_command(&JobCommand::Wait(&a)),
         Command::Fetch(a) => crate::client::run_job_command(&JobCommand::Fetch(&a)),
         Command::Cancel(a) => crate::client::run_job_command(&JobCommand::Cancel(&a)),
+        Command::Relay(args) => crate::relay::run(&args),
+        Command::Loadgen(args) => crate::loadgen::run(&args),
         Command::CheckScene(args) => {
             crate::scene_check::run_child(&args.scene, &args.root, &args.settings, &args.out)
         }

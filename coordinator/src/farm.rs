@@ -255,6 +255,7 @@ impl Farm {
                         store.update_job(id, row.next_start, r.state, None)?;
                     }
                     scheduler.add_job(id, row.total, row.window, r.next_start, &r.done, r.state);
+                    scheduler.set_pixels(id, row.width as u64 * row.height as u64);
                     jobs.insert(id, r.entry);
                 }
                 Err(message) => {
@@ -357,6 +358,7 @@ impl Farm {
         )?;
         self.scheduler
             .add_job(id, total, window, 0, &[], JobState::Queued);
+        self.scheduler.set_pixels(id, width as u64 * height as u64);
         let row = JobRow {
             id,
             created_ms: unix_ms(),
@@ -402,7 +404,8 @@ impl Farm {
         let now = self.now();
         let key = self.new_key();
         self.roster.asked(&req.worker, req.threads);
-        let Some(g) = self.scheduler.lease(&req.worker, now) else {
+        let renderers = req.renderers.unwrap_or(1).max(1);
+        let Some(g) = self.scheduler.lease_for(&req.worker, renderers, now) else {
             return Ok(None);
         };
         self.lease_keys.insert(g.lease_id, key.clone());
@@ -429,6 +432,9 @@ impl Farm {
             deadline_ms: self.lease_timeout_ms,
             heartbeat_ms: self.heartbeat_ms,
             key,
+            accept_encoding: vec![photonfarm::compression::ZSTD.to_string()],
+            width: job.width,
+            height: job.height,
         };
         self.persist_progress(g.job_id)?;
         Ok(Some(lease))
@@ -457,9 +463,13 @@ impl Farm {
     }
 
     /// Image size and pass range a lease's result must have (checked before reading it).
-    pub fn expected_result(&self, lease_id: u64, key: &str) -> Result<Expected, FarmError> {
+    /// Also notes the result's arrival, to measure the worker's speed without the time its
+    /// upload waits for the coordinator.
+    pub fn expected_result(&mut self, lease_id: u64, key: &str) -> Result<Expected, FarmError> {
         self.check_key(lease_id, key)?;
-        let g = self.scheduler.lease_range(lease_id, self.now())?;
+        let now = self.now();
+        let g = self.scheduler.lease_range(lease_id, now)?;
+        self.scheduler.arriving(lease_id, now);
         let job = &self.jobs[&g.job_id];
         Ok(Expected {
             job: g.job_id,
@@ -819,7 +829,7 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
     for (start, end) in ranges {
         // A damaged batch is dropped: its passes are simply rendered again.
         let added = layout
-            .load_batch(row.id, start, end)
+            .load_batch(row.id, start, end, row.width, row.height)
             .and_then(|r| {
                 acc.add(start, r.sum, r.odd)
                     .map_err(|e| StoreError::Corrupt(format!("batch {start}..{end}"), e.to_string()))
@@ -909,6 +919,7 @@ mod tests {
         let req = LeaseRequest {
             worker: "w".into(),
             threads: 1,
+            renderers: None,
         };
         let lease = farm.lease(&req).unwrap().unwrap();
         assert_eq!(lease.job_id, done);

@@ -95,6 +95,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             lease_timeout_ms: u64::MAX / 4,
             target_batch_ms: 500,
             max_batch: 1 << 16,
+            absorb_pixels_per_s: 0.0,
         },
         1,
     );

@@ -14,7 +14,11 @@
 //!   a failure of its worker, so a batch that kills every worker fails its job instead of
 //!   being handed out forever; and a range that every worker seen lately is barred from fails
 //!   the job with a message instead of waiting for a worker that may never come.
-//! - Batch sizes aim at a target duration from each worker's measured rate on the job.
+//! - Batch sizes aim at a target duration from each worker's measured rate on the job. The
+//!   target grows with the number of workers present so that their results together stay
+//!   within what the coordinator absorbs: target = max(`target_batch_ms`, workers × image
+//!   pixels / `absorb_pixels_per_s`). Each worker then sends fewer results as workers are
+//!   added, and the coordinator's load stays flat (docs/scaling.md).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
@@ -30,6 +34,9 @@ pub struct SchedulerConfig {
     pub target_batch_ms: Millis,
     /// Largest batch, whatever the rate.
     pub max_batch: u64,
+    /// Result pixels per second the coordinator absorbs (results × image pixels); batches
+    /// lengthen to keep all workers' results within it. 0: no such growth.
+    pub absorb_pixels_per_s: f64,
 }
 
 impl Default for SchedulerConfig {
@@ -38,9 +45,14 @@ impl Default for SchedulerConfig {
             lease_timeout_ms: 30_000,
             target_batch_ms: 5_000,
             max_batch: 4096,
+            absorb_pixels_per_s: DEFAULT_ABSORB_PIXELS_PER_S,
         }
     }
 }
+
+/// Result pixels per second one coordinator core absorbs, from the load benchmark
+/// (docs/scaling.md), with a margin.
+pub const DEFAULT_ABSORB_PIXELS_PER_S: f64 = 20e6;
 
 /// A job's lifecycle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -121,6 +133,10 @@ struct LeaseInfo {
     worker: String,
     issued: Millis,
     deadline: Millis,
+    /// When its result started to arrive: the worker's speed is measured to then, not to
+    /// the end of an upload that queued behind others (a busy coordinator would otherwise
+    /// measure workers slower, shorten their batches and get busier).
+    arrived: Option<Millis>,
 }
 
 #[derive(Clone, Debug)]
@@ -138,6 +154,8 @@ struct JobSched {
     last_error: Option<String>,
     /// Passes per millisecond, per worker, from its finished batches.
     rates: HashMap<String, f64>,
+    /// Image pixels (the size of each result), for the batch length rule; 0 if unknown.
+    pixels: u64,
 }
 
 /// The scheduler of all jobs.
@@ -219,22 +237,39 @@ impl Scheduler {
                 failures: HashMap::new(),
                 last_error: None,
                 rates: HashMap::new(),
+                pixels: 0,
             },
         );
     }
 
+    /// Sets a job's image size in pixels (each result's size), which lengthens its batches
+    /// as workers are added (see the module's rules).
+    pub fn set_pixels(&mut self, job_id: u64, pixels: u64) {
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            job.pixels = pixels;
+        }
+    }
+
     /// Grants the next batch to `worker`, from the oldest job with work it may take.
     pub fn lease(&mut self, worker: &str, now: Millis) -> Option<Grant> {
+        self.lease_for(worker, 1, now)
+    }
+
+    /// [`Scheduler::lease`] for a client that renders on `renderers` machines (a relay): its
+    /// first batch on a job has a pass for each.
+    pub fn lease_for(&mut self, worker: &str, renderers: u32, now: Millis) -> Option<Grant> {
         let config = self.config;
         self.seen.insert(worker.to_string(), now);
         // Workers that asked within two lease timeouts count as present.
         let recent = now.saturating_sub(config.lease_timeout_ms.saturating_mul(2));
         self.seen.retain(|_, &mut t| t >= recent);
+        let clients = self.seen.len() as u64;
         for (&job_id, job) in self.jobs.iter_mut() {
             if job.state.is_final() {
                 continue;
             }
-            let size = batch_size(&config, job.rates.get(worker).copied());
+            let target = target_ms(&config, clients, job.pixels);
+            let size = batch_size(&config, target, job.rates.get(worker).copied(), renderers);
             let Some(range) = take_free(job, worker, size).or_else(|| take_new(job, size)) else {
                 fail_if_barred_everywhere(job, self.seen.keys());
                 continue;
@@ -251,6 +286,7 @@ impl Scheduler {
                     worker: worker.to_string(),
                     issued: now,
                     deadline: now + config.lease_timeout_ms,
+                    arrived: None,
                 },
             );
             return Some(Grant {
@@ -297,6 +333,7 @@ impl Scheduler {
                 worker: worker.to_string(),
                 issued: deadline.saturating_sub(self.config.lease_timeout_ms),
                 deadline,
+                arrived: None,
             },
         );
         true
@@ -338,13 +375,20 @@ impl Scheduler {
         })
     }
 
+    /// Notes that a lease's result started to arrive (its worker's speed is measured to then).
+    pub fn arriving(&mut self, lease_id: u64, now: Millis) {
+        if let Some(l) = self.leases.get_mut(&lease_id) {
+            l.arrived.get_or_insert(now);
+        }
+    }
+
     /// Accepts a lease's result: the lease ends, its passes count once. Returns the range.
     pub fn complete(&mut self, lease_id: u64, now: Millis) -> Result<Grant, LeaseError> {
         let grant = self.lease_range(lease_id, now)?;
         let lease = self.leases.remove(&lease_id).expect("checked above");
         let job = self.jobs.get_mut(&lease.job).expect("a lease's job exists");
         job.completed += lease.end - lease.start;
-        let elapsed = (now.saturating_sub(lease.issued)).max(1) as f64;
+        let elapsed = (lease.arrived.unwrap_or(now).saturating_sub(lease.issued)).max(1) as f64;
         job.rates
             .insert(lease.worker, (lease.end - lease.start) as f64 / elapsed);
         if job.completed >= job.total {
@@ -495,11 +539,24 @@ impl Scheduler {
     }
 }
 
-fn batch_size(config: &SchedulerConfig, rate: Option<f64>) -> u64 {
+/// The batch duration aimed at with `clients` workers present on a job of `pixels` pixels:
+/// `target_batch_ms`, or longer when that many workers' results would exceed what the
+/// coordinator absorbs.
+pub fn target_ms(config: &SchedulerConfig, clients: u64, pixels: u64) -> Millis {
+    let spread = if config.absorb_pixels_per_s > 0.0 {
+        (clients as f64 * pixels as f64 * 1000.0 / config.absorb_pixels_per_s) as Millis
+    } else {
+        0
+    };
+    config.target_batch_ms.max(spread)
+}
+
+fn batch_size(config: &SchedulerConfig, target_ms: Millis, rate: Option<f64>, renderers: u32) -> u64 {
     match rate {
-        // A worker's first batch on a job is one pass: it measures the worker's speed.
-        None => 1,
-        Some(r) => ((r * config.target_batch_ms as f64) as u64).clamp(1, config.max_batch),
+        // A worker's first batch on a job is one pass (one per renderer of a relay): it
+        // measures the worker's speed.
+        None => (renderers as u64).clamp(1, config.max_batch),
+        Some(r) => ((r * target_ms as f64) as u64).clamp(1, config.max_batch),
     }
 }
 
@@ -570,6 +627,7 @@ mod tests {
                 lease_timeout_ms: 1000,
                 target_batch_ms: 100,
                 max_batch: 1000,
+                absorb_pixels_per_s: 0.0,
             },
             1,
         )
@@ -740,6 +798,39 @@ mod tests {
         assert_eq!(handed, expected);
         assert_eq!(s.complete(100, 10).unwrap().start, 4);
         assert!(s.expire(51).is_empty());
+    }
+
+    #[test]
+    fn batches_lengthen_with_the_workers_present() {
+        let config = SchedulerConfig {
+            lease_timeout_ms: 1_000_000,
+            target_batch_ms: 5_000,
+            max_batch: 1_000_000,
+            absorb_pixels_per_s: 1e6,
+        };
+        // 1000 pixels, 1e6 pixels/s absorbed: up to 5000 workers keep the 5 s target.
+        assert_eq!(target_ms(&config, 1, 1000), 5_000);
+        assert_eq!(target_ms(&config, 5_000, 1000), 5_000);
+        assert_eq!(target_ms(&config, 20_000, 1000), 20_000);
+        let mut s = Scheduler::new(config, 1);
+        s.add_job(1, 1 << 40, 1 << 40, 0, &[], JobState::Queued);
+        s.set_pixels(1, 2_000_000);
+        // A relay's first batch has a pass per renderer.
+        let g = s.lease_for("relay", 8, 0).unwrap();
+        assert_eq!(g.end - g.start, 8);
+        // One pass per second measured: 5 passes with 2 workers (2 × 2 Mpx / 1 Mpx/s = 4 s
+        // is under the 5 s target)...
+        s.lease("other", 0).unwrap();
+        s.complete(g.lease_id, 8_000).unwrap();
+        let g = s.lease("relay", 8_000).unwrap();
+        assert_eq!(g.end - g.start, 5);
+        s.complete(g.lease_id, 13_000).unwrap();
+        // ... and 20 passes (20 s) with 10 workers present (20 Mpx / 1 Mpx/s).
+        for i in 0..8 {
+            s.lease(&format!("w{i}"), 13_000).unwrap();
+        }
+        let g = s.lease("relay", 13_000).unwrap();
+        assert_eq!(g.end - g.start, 20);
     }
 
     #[test]

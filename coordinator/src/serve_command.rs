@@ -53,6 +53,9 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     if !(args.batch_seconds > 0.0 && args.batch_seconds.is_finite()) {
         bail!("--batch-seconds must be a positive number of seconds");
     }
+    if !(args.absorb_mpx_per_second >= 0.0 && args.absorb_mpx_per_second.is_finite()) {
+        bail!("--absorb-mpx-per-second must be 0 (off) or a positive number");
+    }
     if args.max_upload_mb == 0 || args.checkpoint_every == 0 {
         bail!("--max-upload-mb and --checkpoint-every must be at least 1");
     }
@@ -79,6 +82,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
             scheduler: SchedulerConfig {
                 lease_timeout_ms: (args.lease_timeout * 1000.0) as u64,
                 target_batch_ms: (args.batch_seconds * 1000.0) as u64,
+                absorb_pixels_per_s: args.absorb_mpx_per_second * 1e6,
                 ..SchedulerConfig::default()
             },
             default_checkpoint: args.checkpoint_every,

@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 
 use photonfarm::film::FilmSum;
 use photonfarm::parity::OddSums;
-use photonfarm::protocol::{BatchResult, decode_result, encode_batch, encode_result};
+use photonfarm::protocol::{BatchResult, decode_result, encode_batch, encode_result, max_encoded_batch};
 use rusqlite::{Connection, OptionalExtension, params};
 
 use crate::scheduler::JobState;
@@ -231,11 +231,22 @@ impl Layout {
         }
     }
 
-    /// Reads one stored batch result, as the worker sent it.
-    pub fn load_batch(&self, job: u64, start: u64, end: u64) -> Result<BatchResult, StoreError> {
+    /// Reads one stored batch result of a `width` × `height` job, as the worker sent it
+    /// (compressed or not: see [`photonfarm::compression`]).
+    pub fn load_batch(
+        &self,
+        job: u64,
+        start: u64,
+        end: u64,
+        width: u32,
+        height: u32,
+    ) -> Result<BatchResult, StoreError> {
         let path = self.batch_path(job, start, end);
+        let corrupt = |e: String| StoreError::Corrupt(path.display().to_string(), e);
         let bytes = std::fs::read(&path).map_err(io(&path))?;
-        decode_result(&bytes).map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string()))
+        let bytes = photonfarm::compression::decode_stored(bytes, max_encoded_batch(width, height))
+            .map_err(|e| corrupt(e.to_string()))?;
+        decode_result(&bytes).map_err(|e| corrupt(e.to_string()))
     }
 }
 

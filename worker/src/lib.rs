@@ -18,6 +18,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use photonfarm::bundle::UnpackLimits;
+use photonfarm::compression::{self, Encoding};
 use photonfarm::film::FilmSum;
 use photonfarm::limits::Limits;
 use photonfarm::parity::OddSums;
@@ -252,6 +253,7 @@ async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<
     let req = LeaseRequest {
         worker: config.name.clone(),
         threads: config.threads as u32,
+        renderers: None,
     };
     let resp = client
         .req(reqwest::Method::POST, "/api/lease")
@@ -359,7 +361,17 @@ async fn work_on(
         start: lease.start,
         end: lease.end,
     };
-    outbox.put(&parcel, &encode_result(&sum, &odd))?;
+    // Compressed when the coordinator says it takes zstd (older ones get the plain encoding);
+    // the outbox keeps the bytes as they will be sent.
+    let encoded = encode_result(&sum, &odd);
+    let bytes = if lease.accept_encoding.iter().any(|e| e == compression::ZSTD) {
+        tokio::task::spawn_blocking(move || compression::compress(&encoded))
+            .await
+            .context("the compression thread failed")?
+    } else {
+        encoded
+    };
+    outbox.put(&parcel, &bytes)?;
     Ok(Some(parcel))
 }
 
@@ -380,19 +392,21 @@ async fn deliver(
     stop: &mut watch::Receiver<bool>,
 ) -> anyhow::Result<bool> {
     let bytes = outbox.bytes(parcel)?;
+    let encoding = Encoding::sniff(&bytes);
     let mut backoff = Duration::from_millis(200);
     let mut stopped_at: Option<std::time::Instant> = None;
     loop {
-        let sent = client
+        let mut request = client
             .req(
                 reqwest::Method::PUT,
                 &format!("/api/leases/{}/result", parcel.lease_id),
             )
             .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
-            .header(LEASE_KEY_HEADER, &parcel.key)
-            .body(bytes.clone())
-            .send()
-            .await;
+            .header(LEASE_KEY_HEADER, &parcel.key);
+        if let Some(e) = encoding.header() {
+            request = request.header(reqwest::header::CONTENT_ENCODING, e);
+        }
+        let sent = request.body(bytes.clone()).send().await;
         let failure = match sent {
             Ok(resp) if resp.status().is_success() => {
                 trouble.cleared(&client.base);
