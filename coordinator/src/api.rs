@@ -29,6 +29,7 @@ use tokio::sync::Semaphore;
 use crate::accumulator::Accumulator;
 use crate::admission::Admission;
 use crate::farm::{Committed, Farm, FarmError};
+use crate::result_body::{BodyError, read_result_body};
 use crate::scene_check::{CheckError, check_in_child};
 use crate::store::Layout;
 
@@ -599,31 +600,17 @@ async fn result(
     // Refuse a dead lease, or one of another worker, before reading a large body.
     let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
     let max = max_encoded_batch(expected.width, expected.height);
-    // On the wire: compressed bodies may be a little larger than their content, never more
-    // than zstd's bound; what they expand to is bounded by `max` while decompressing.
-    let wire_max = match encoding {
-        Encoding::Identity => max,
-        Encoding::Zstd => compression::max_compressed(max),
-    };
-    let declared = headers
-        .get(header::CONTENT_LENGTH)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.parse::<u64>().ok());
-    let over = |n: String| {
-        too_large(format!(
-            "a result for lease {id} ({}x{}) is at most {max} bytes; this one is {n}",
-            expected.width, expected.height
-        ))
-    };
-    if let Some(n) = declared
-        && n > wire_max
-    {
-        return Err(over(n.to_string()));
-    }
-    let _slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
-    let body = axum::body::to_bytes(req.into_body(), wire_max as usize)
+    let (body, _slot) = read_result_body(&headers, req, encoding, max, &state.upload_slots)
         .await
-        .map_err(|_| over("larger".into()))?;
+        .map_err(|e| match e {
+            BodyError::TooLarge(declared) => too_large(format!(
+                "a result for lease {id} ({}x{}) is at most {max} bytes; this one is {}",
+                expected.width,
+                expected.height,
+                declared.map_or("larger".to_string(), |n| n.to_string())
+            )),
+            BodyError::Closed(e) => ApiError::internal(e),
+        })?;
     let st = state.clone();
     blocking(move || store_result(&st, id, &key, expected, encoding, body)).await?;
     Ok(Json(json!({ "accepted": true })).into_response())

@@ -16,6 +16,7 @@ pub mod metrics;
 pub mod progress;
 pub mod relay;
 pub mod render_command;
+pub mod result_body;
 pub mod resume;
 pub mod scene_check;
 pub mod scheduler;

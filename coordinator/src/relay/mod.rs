@@ -35,6 +35,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use crate::cli::RelayArgs;
+use crate::result_body::{BodyError, read_result_body};
 use book::{Book, PartError};
 
 /// Largest result accepted when the upstream does not say the image size (an older
@@ -298,27 +299,15 @@ async fn result(
     } else {
         max_encoded_batch(info.width, info.height)
     };
-    let wire_max = match encoding {
-        Encoding::Identity => max,
-        Encoding::Zstd => compression::max_compressed(max),
-    };
-    let too_large = || {
-        RelayError(
-            StatusCode::PAYLOAD_TOO_LARGE,
-            format!("a result for lease {id} is at most {max} bytes"),
-        )
-    };
-    let declared = headers
-        .get(header::CONTENT_LENGTH)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.parse::<u64>().ok());
-    if declared.is_some_and(|n| n > wire_max) {
-        return Err(too_large());
-    }
-    let _slot = relay.uploads.acquire().await.map_err(bad_gateway)?;
-    let body = axum::body::to_bytes(req.into_body(), wire_max as usize)
+    let (body, _slot) = read_result_body(&headers, req, encoding, max, &relay.uploads)
         .await
-        .map_err(|_| too_large())?;
+        .map_err(|e| match e {
+            BodyError::TooLarge(_) => RelayError(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                format!("a result for lease {id} is at most {max} bytes"),
+            ),
+            BodyError::Closed(e) => bad_gateway(e),
+        })?;
     let decoded = tokio::task::spawn_blocking(move || {
         let plain = compression::decompress_bounded(encoding, &body, max)?;
         decode_result(&plain).map_err(|e| CompressionError::Malformed(e.to_string()))
