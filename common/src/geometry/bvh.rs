@@ -331,54 +331,58 @@ mod obvhs_backend {
         ORay::new(ray.o, ray.d, 0.0, t_max)
     }
 
-    pub(super) fn intersect_cw(cw: &CwBvh, prims: &[Primitive], ray: &Ray, t_max: f32) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        cw.ray_traverse(oray(ray, t_max), &mut RayHit::none(), |r, id| {
-            match prims[id].intersect(ray, r.tmax) {
-                Some((t, b1, b2)) => {
-                    best = Some(Hit {
-                        t,
-                        prim: id as u32,
-                        b1,
-                        b2,
-                    });
-                    t
-                }
-                None => f32::INFINITY,
+    /// obvhs's primitive callback for the closest hit: our own primitive test, keeping the
+    /// barycentrics obvhs does not carry in `best`.
+    fn closest<'a>(
+        prims: &'a [Primitive],
+        ray: &'a Ray,
+        best: &'a mut Option<Hit>,
+    ) -> impl FnMut(&ORay, usize) -> f32 + 'a {
+        move |r, id| match prims[id].intersect(ray, r.tmax) {
+            Some((t, b1, b2)) => {
+                *best = Some(Hit {
+                    t,
+                    prim: id as u32,
+                    b1,
+                    b2,
+                });
+                t
             }
-        });
+            None => f32::INFINITY,
+        }
+    }
+
+    /// obvhs's primitive callback for occlusion.
+    fn any<'a>(prims: &'a [Primitive], ray: &'a Ray) -> impl FnMut(&ORay, usize) -> f32 + 'a {
+        move |r, id| prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.0)
+    }
+
+    pub(super) fn intersect_cw(cw: &CwBvh, prims: &[Primitive], ray: &Ray, t_max: f32) -> Option<Hit> {
+        let mut best = None;
+        cw.ray_traverse(
+            oray(ray, t_max),
+            &mut RayHit::none(),
+            closest(prims, ray, &mut best),
+        );
         best
     }
 
     pub(super) fn occluded_cw(cw: &CwBvh, prims: &[Primitive], ray: &Ray, t_max: f32) -> bool {
-        !cw.ray_traverse_miss(oray(ray, t_max), |r, id| {
-            prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.0)
-        })
+        !cw.ray_traverse_miss(oray(ray, t_max), any(prims, ray))
     }
 
     pub(super) fn intersect_bin(b: &Bvh2, prims: &[Primitive], ray: &Ray, t_max: f32) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        b.ray_traverse(oray(ray, t_max), &mut RayHit::none(), |r, id| {
-            match prims[id].intersect(ray, r.tmax) {
-                Some((t, b1, b2)) => {
-                    best = Some(Hit {
-                        t,
-                        prim: id as u32,
-                        b1,
-                        b2,
-                    });
-                    t
-                }
-                None => f32::INFINITY,
-            }
-        });
+        let mut best = None;
+        b.ray_traverse(
+            oray(ray, t_max),
+            &mut RayHit::none(),
+            closest(prims, ray, &mut best),
+        );
         best
     }
 
     pub(super) fn occluded_bin(b: &Bvh2, prims: &[Primitive], ray: &Ray, t_max: f32) -> bool {
-        !b.ray_traverse_miss(oray(ray, t_max), |r, id| {
-            prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.0)
-        })
+        !b.ray_traverse_miss(oray(ray, t_max), any(prims, ray))
     }
 }
 
