@@ -5,12 +5,11 @@
 
 mod support;
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::Command;
 
 use serde_json::Value;
-use support::{Proc, cbox_spheres as scene, coordinator_bin, worker};
+use support::{Proc, announced, cbox_spheres as scene, coordinator_bin, worker};
 
 /// SPPM (so the relay must hand each worker its passes' radii) with a Gaussian filter (so
 /// pixel weights are merged too); small enough for CI.
@@ -32,30 +31,17 @@ const JOB: &[&str] = &[
 ];
 
 fn relay(upstream: &str) -> (Proc, String) {
-    let mut child = Command::new(coordinator_bin())
-        .args([
-            "relay",
-            "--upstream",
-            upstream,
-            "--bind",
-            "127.0.0.1:0",
-            "--name",
-            "relay-a",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let url = line
-        .trim()
-        .strip_prefix("listening on ")
-        .expect("the relay announces its address")
-        .to_string();
-    (Proc(child), url)
+    let mut command = Command::new(coordinator_bin());
+    command.args([
+        "relay",
+        "--upstream",
+        upstream,
+        "--bind",
+        "127.0.0.1:0",
+        "--name",
+        "relay-a",
+    ]);
+    announced(command)
 }
 
 fn get(url: &str) -> Value {

@@ -81,10 +81,17 @@ pub fn serve_limited(
         }
         None => Command::new(coordinator_bin()),
     };
-    let mut child = command
+    command
         .args(["serve", "--bind", bind, "--data", data.to_str().unwrap()])
         .args(extra)
-        .envs(env.iter().copied())
+        .envs(env.iter().copied());
+    announced(command)
+}
+
+/// Starts a `coordinator serve` or `coordinator relay` command and returns it with the URL its
+/// first line announces ("listening on URL").
+pub fn announced(mut command: Command) -> (Proc, String) {
+    let mut child = command
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
