@@ -138,6 +138,21 @@ async fn api(url: &str, path: &str) -> Value {
         .unwrap()
 }
 
+/// Clicks the element with id `id`.
+async fn click(c: &Client, id: &str) {
+    c.find(Locator::Id(id)).await.unwrap().click().await.unwrap();
+}
+
+/// Types `text` into the element with id `id`.
+async fn type_into(c: &Client, id: &str, text: &str) {
+    c.find(Locator::Id(id))
+        .await
+        .unwrap()
+        .send_keys(text)
+        .await
+        .unwrap();
+}
+
 async fn screenshot(c: &Client, name: &str) {
     let png = c.screenshot().await.unwrap();
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
@@ -201,18 +216,8 @@ async fn web_page_in_headless_chromium() {
         .unwrap();
     let empty = empty.as_str().unwrap();
     assert!(empty.starts_with("0:") && !empty.contains("Job "), "{empty}");
-    c.find(Locator::Id("token"))
-        .await
-        .unwrap()
-        .send_keys("not-the-token")
-        .await
-        .unwrap();
-    c.find(Locator::Id("login-button"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    type_into(&c, "token", "not-the-token").await;
+    click(&c, "login-button").await;
     wait_js(
         &c,
         "the refusal",
@@ -227,18 +232,8 @@ async fn web_page_in_headless_chromium() {
     assert_eq!(view, json!(""), "a refused token shows no data");
 
     // Log in: both jobs are listed, the long one running on the workers.
-    c.find(Locator::Id("token"))
-        .await
-        .unwrap()
-        .send_keys(TOKEN)
-        .await
-        .unwrap();
-    c.find(Locator::Id("login-button"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    type_into(&c, "token", TOKEN).await;
+    click(&c, "login-button").await;
     wait_js(
         &c,
         "the job list with a running job and a done one",
@@ -299,12 +294,7 @@ async fn web_page_in_headless_chromium() {
     assert!(!urls.as_str().unwrap().contains(TOKEN), "{urls}");
 
     // The workers.
-    c.find(Locator::Id("nav-workers"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    click(&c, "nav-workers").await;
     wait_js(
         &c,
         "both workers, one with a lease",
@@ -342,26 +332,11 @@ async fn web_page_in_headless_chromium() {
     let bundle = dir.path().join("bundle.tar");
     let scene = support::api::scene(r#"<integrator type="path"/>"#, 32, 24);
     std::fs::write(&bundle, support::api::tar_of(&[("scene.xml", &scene)])).unwrap();
-    c.find(Locator::Id("nav-submit"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    click(&c, "nav-submit").await;
     let file = c.wait().for_element(Locator::Id("bundle")).await.unwrap();
     file.send_keys(bundle.to_str().unwrap()).await.unwrap();
-    c.find(Locator::Id("passes"))
-        .await
-        .unwrap()
-        .send_keys("8")
-        .await
-        .unwrap();
-    c.find(Locator::Id("submit-button"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    type_into(&c, "passes", "8").await;
+    click(&c, "submit-button").await;
     let hash = wait_js(&c, "the new job's page", Duration::from_secs(30),
         &format!("return location.hash !== '#/submit' && location.hash.startsWith('#/jobs/') && location.hash !== '#/jobs/{running}' ? location.hash : null")).await;
     let new_id: u64 = hash
@@ -378,12 +353,7 @@ async fn web_page_in_headless_chromium() {
     );
 
     // Logging out leaves nothing on the page.
-    c.find(Locator::Id("logout"))
-        .await
-        .unwrap()
-        .click()
-        .await
-        .unwrap();
+    click(&c, "logout").await;
     wait_js(&c, "the login form again", Duration::from_secs(10),
         "return !document.getElementById('login').hidden && document.getElementById('view').childElementCount === 0
              && sessionStorage.length === 0").await;
