@@ -37,7 +37,17 @@ fn main() {
     let mut trace = Vec::new();
     for run in 0..RUNS as u64 {
         let t = Instant::now();
-        one.install(|| sppm::trace_photons(&scene, 0, run, PHOTONS, u32::MAX, &mut buffers));
+        one.install(|| {
+            sppm::trace_photons(
+                &scene,
+                0,
+                run,
+                PHOTONS,
+                u32::MAX,
+                sppm::VolumeRecord::Points,
+                &mut buffers,
+            )
+        });
         trace.push(PHOTONS as f64 / t.elapsed().as_secs_f64());
     }
     println!(
@@ -177,7 +187,15 @@ fn main() {
             times.push(t.elapsed().as_secs_f64());
         }
         let mut buffers = sppm::PhotonBuffers::default();
-        sppm::trace_photons(&scene, 0, 0, PHOTONS, u32::MAX, &mut buffers);
+        sppm::trace_photons(
+            &scene,
+            0,
+            0,
+            PHOTONS,
+            u32::MAX,
+            sppm::VolumeRecord::Points,
+            &mut buffers,
+        );
         println!(
             "fog scene {name}, 128x128, 200000 photons: {:.1} ms per iteration ({} surface and {} volume photons stored)",
             median(times) * 1e3,

@@ -122,6 +122,13 @@ impl Medium {
         }
     }
 
+    /// Probability that [`Medium::sample_flight`] flies past distance `t` (its channel is picked
+    /// uniformly among the three): what turns a photon beam ended at its sampled collision into
+    /// an unbiased estimate of the transmitted power, Φ·Tr(t)/P(flight > t) along it.
+    pub fn flight_survival(&self, t: f32) -> f32 {
+        self.transmittance(t).dot(Rgb::splat(1.0 / 3.0))
+    }
+
     /// ∫ Tr(t) dt over [a, b], per channel: what a stretch of the ray contributes to an
     /// estimate that is constant along it (the beam radiance estimate's photon chords).
     pub fn integrated_transmittance(&self, a: f32, b: f32) -> Rgb {

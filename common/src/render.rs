@@ -7,7 +7,7 @@ use std::ops::Range;
 
 use rayon::prelude::*;
 
-use glam::Vec2;
+use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
 use crate::film::{FilmSum, add_fixed, to_fixed};
@@ -15,7 +15,8 @@ use crate::geometry::Ray;
 use crate::integrator::direct_illumination::{self, DirectSettings};
 use crate::integrator::path::{self, PathSettings};
 use crate::integrator::sppm::{
-    self, BeamMap, GatherContext, PhotonBuffers, PhotonMap, SppmSettings, VolumeEstimate, VolumeMap,
+    self, BeamMap, GatherContext, PhotonBeamMap, PhotonBuffers, PhotonMap, SppmSettings, VolumeEstimate,
+    VolumeMap,
 };
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
@@ -96,8 +97,21 @@ pub fn render_sppm_iterations(
     let mut map = PhotonMap::new();
     let mut point_map = PhotonMap::new();
     let mut beam_map = BeamMap::new();
+    let mut flights = PhotonBeamMap::new();
+    let record = settings.volume_record();
+    let beam_bounds = scene
+        .bounds()
+        .grow(scene.camera.to_world.transform_point3a(Vec3A::ZERO));
     for (iteration, &[radius, volume_radius]) in iterations.zip(radii) {
-        sppm::trace_photons(scene, seed, iteration, settings.photons, max_depth, &mut photons);
+        sppm::trace_photons(
+            scene,
+            seed,
+            iteration,
+            settings.photons,
+            max_depth,
+            record,
+            &mut photons,
+        );
         map.build(&photons.surface, radius);
         let volume_map = match settings.volume_estimate {
             VolumeEstimate::Beam => {
@@ -107,6 +121,10 @@ pub fn render_sppm_iterations(
             VolumeEstimate::Point => {
                 point_map.build(&photons.volume, volume_radius);
                 VolumeMap::Point(&point_map)
+            }
+            VolumeEstimate::PhotonBeams => {
+                flights.build(&photons.beams, volume_radius, &beam_bounds);
+                VolumeMap::PhotonBeams(&flights)
             }
         };
         let ctx = GatherContext {

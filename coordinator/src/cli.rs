@@ -154,7 +154,7 @@ pub struct ConvergeArgs {
     #[arg(long)]
     pub reference: PathBuf,
     /// Methods to compare, comma-separated: path, sppm (its default volume estimate), sppm-beam,
-    /// sppm-point (SPPM with that volume estimate).
+    /// sppm-point, sppm-photon-beams (SPPM with that volume estimate).
     #[arg(long, default_value = "path,sppm")]
     pub methods: String,
     /// Render time per line, seconds.
@@ -208,6 +208,8 @@ pub enum VolumeEstimateArg {
     Beam,
     /// The photons around one sampled collision.
     Point,
+    /// Every photon flight passing the camera ray (photon beams).
+    PhotonBeams,
 }
 
 impl VolumeEstimateArg {
@@ -216,6 +218,7 @@ impl VolumeEstimateArg {
         match self {
             VolumeEstimateArg::Beam => VolumeEstimate::Beam,
             VolumeEstimateArg::Point => VolumeEstimate::Point,
+            VolumeEstimateArg::PhotonBeams => VolumeEstimate::PhotonBeams,
         }
     }
 }
@@ -253,12 +256,14 @@ pub struct JobArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub k: Option<f32>,
     /// SPPM: initial volume radius over the initial surface radius [default: the scene's
-    /// volume_radius_ratio, else 0.5 with --volume-estimate beam and 2 with point].
+    /// volume_radius_ratio, else 0.5 with --volume-estimate beam and 2 with point and
+    /// photon-beams].
     #[arg(long, allow_negative_numbers = true)]
     pub volume_radius_ratio: Option<f32>,
     /// SPPM: how light scattered in media is estimated from the volume photons: `beam` along
-    /// the whole camera ray (Jarosz et al.'s beam radiance estimate), or `point` at one sampled
-    /// collision [default: beam]. See docs/volumes.md.
+    /// the whole camera ray (Jarosz et al.'s beam radiance estimate), `point` at one sampled
+    /// collision, or `photon-beams` from photon flights passing the camera ray [default: beam].
+    /// See docs/volumes.md.
     #[arg(long, value_enum)]
     pub volume_estimate: Option<VolumeEstimateArg>,
     /// Seed of every random number: the same seed gives the same image bytes.

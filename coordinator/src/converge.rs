@@ -143,10 +143,11 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                     ..base.clone()
                 },
             )),
-            "sppm" | "sppm-beam" | "sppm-point" => {
+            "sppm" | "sppm-beam" | "sppm-point" | "sppm-photon-beams" => {
                 let volume_estimate = match m {
                     "sppm-beam" => Some(VolumeEstimate::Beam),
                     "sppm-point" => Some(VolumeEstimate::Point),
+                    "sppm-photon-beams" => Some(VolumeEstimate::PhotonBeams),
                     _ => None,
                 };
                 let alphas: Vec<Option<f64>> = if args.alpha.is_empty() {

@@ -112,15 +112,31 @@ impl Walk {
     /// random numbers), then the surface, crossing null surfaces (medium boundaries) without a
     /// bounce. A flight that passes through its medium has its weight applied here.
     pub fn next_event<'s>(&mut self, scene: &'s Scene, sampler: &mut Sampler) -> Event<'s> {
+        self.next_event_tracing(scene, sampler, |_, _, _| {})
+    }
+
+    /// [`Walk::next_event`], calling `stretch(walk, medium, t)` for every stretch of medium the
+    /// flight covers, from the ray's origin to `t` (the collision, or the surface behind), with
+    /// the throughput at the stretch's start: the segments photon beams are made of.
+    pub fn next_event_tracing<'s>(
+        &mut self,
+        scene: &'s Scene,
+        sampler: &mut Sampler,
+        mut stretch: impl FnMut(&Walk, u32, f32),
+    ) -> Event<'s> {
         self.advance(scene, |walk, m, t_surface| {
             let med = &scene.media[m as usize];
             match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
-                Flight::Collision { t, weight } => Some(Event::Medium {
-                    p: walk.ray.at(t),
-                    medium: m,
-                    weight,
-                }),
+                Flight::Collision { t, weight } => {
+                    stretch(walk, m, t);
+                    Some(Event::Medium {
+                        p: walk.ray.at(t),
+                        medium: m,
+                        weight,
+                    })
+                }
                 Flight::Passed { weight } => {
+                    stretch(walk, m, t_surface);
                     walk.beta *= weight;
                     None
                 }

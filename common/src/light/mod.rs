@@ -87,6 +87,17 @@ impl Light {
         }
     }
 
+    /// The stretch [a, b] of `ray.at(0..t_max)` that this light can reach, or None if it
+    /// reaches none of it: a beam lights only its cylinder, so light in a medium sampled within
+    /// the stretch finds the beam on every sample instead of on the few that fall in it. Other
+    /// lights may reach the whole segment.
+    pub fn lit_span(&self, ray: &crate::geometry::Ray, t_max: f32) -> Option<(f32, f32)> {
+        match self {
+            Light::Beam(l) => l.lit_span(ray, t_max),
+            _ => (t_max > 0.0).then_some((0.0, t_max)),
+        }
+    }
+
     /// Samples a point on the light as seen from `p`.
     pub fn sample_li(
         &self,

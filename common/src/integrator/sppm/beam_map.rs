@@ -17,7 +17,7 @@
 
 use glam::Vec3A;
 
-use super::grid::{Buckets, buckets_of_sphere, cell_of, hash_cell};
+use super::grid::{Buckets, buckets_of_sphere, clip_to_box, hash_cell, march};
 use super::photon::Photon;
 use crate::color::Rgb;
 use crate::geometry::Ray;
@@ -132,37 +132,8 @@ impl BeamMap {
             return;
         };
         let (o, d) = (ray.o, ray.d);
-        let inv_cell = 1.0 / self.cell;
         let r2 = self.radius * self.radius;
-        // Amanatides and Woo's march from the cell at t0.
-        let start = o + d * t0;
-        let mut cell = cell_of(start, inv_cell);
-        let mut step = [0i32; 3];
-        let mut t_next = [f32::INFINITY; 3];
-        let mut t_delta = [f32::INFINITY; 3];
-        for a in 0..3 {
-            if d[a] > 0.0 {
-                step[a] = 1;
-                t_next[a] = t0 + ((cell[a] + 1) as f32 * self.cell - start[a]) / d[a];
-                t_delta[a] = self.cell / d[a];
-            } else if d[a] < 0.0 {
-                step[a] = -1;
-                t_next[a] = t0 + (cell[a] as f32 * self.cell - start[a]) / d[a];
-                t_delta[a] = -self.cell / d[a];
-            }
-        }
-        let mut t_in = t0;
-        while t_in < t1 {
-            let axis = if t_next[0] < t_next[1] {
-                if t_next[0] < t_next[2] { 0 } else { 2 }
-            } else if t_next[1] < t_next[2] {
-                1
-            } else {
-                2
-            };
-            let t_out = t_next[axis].min(t1);
-            // Cells own [t_in, t_out); the last one also owns its end, the segment's end.
-            let last = t_next[axis] >= t1;
+        march(ray, t0, t1, self.cell, |cell, t_in, t_out, last| {
             let bucket = hash_cell(cell, self.mask);
             for e in &self.entries[self.buckets.range(bucket)] {
                 let v = Vec3A::from(e.position) - o;
@@ -179,21 +150,8 @@ impl BeamMap {
                     f(&self.photons[e.index as usize], a, b);
                 }
             }
-            t_in = t_out;
-            cell[axis] += step[axis];
-            t_next[axis] += t_delta[axis];
-        }
+        });
     }
-}
-
-/// The part of the segment [0, t_max] inside the box, if any.
-fn clip_to_box(ray: &Ray, lo: Vec3A, hi: Vec3A, t_max: f32) -> Option<(f32, f32)> {
-    let inv = ray.d.recip();
-    let (a, b) = ((lo - ray.o) * inv, (hi - ray.o) * inv);
-    // NaN (a zero direction component on the box's plane) compares false and is ignored.
-    let t0 = a.min(b).max_element().max(0.0);
-    let t1 = a.max(b).min_element().min(t_max);
-    (t0 < t1).then_some((t0, t1))
 }
 
 #[cfg(test)]

@@ -1,10 +1,12 @@
 //! The photon pass: photons leave the lights in proportion to their power, fly through media
 //! and bounce off surfaces with Russian roulette, and are stored where a surface has a diffuse
-//! part and where they collide in a medium.
+//! part and, in media, where they collide (photon points) or along their flights (photon
+//! beams).
 
 use rayon::prelude::*;
 
 use super::photon::Photon;
+use super::photon_beams::BeamSegment;
 use crate::bsdf::TransportMode;
 use crate::geometry::{Ray, offset_ray_origin};
 use crate::integrator::walk::{Event, Walk, photon_roulette};
@@ -22,6 +24,19 @@ pub struct PhotonBuffers {
     pub surface: Vec<Photon>,
     /// Photons at collisions in media.
     pub volume: Vec<Photon>,
+    /// Flights through media.
+    pub beams: Vec<BeamSegment>,
+}
+
+/// What the photon pass keeps of photons in media.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VolumeRecord {
+    /// Their collisions (photon points), from every photon.
+    Points,
+    /// Their flights (photon beams), from the first `n` photons of the iteration only: a beam
+    /// lights many more camera rays than a point, so far fewer are needed, and each costs every
+    /// ray it passes. Their power is scaled by photons / n.
+    Beams(u64),
 }
 
 /// Traces photons 0..count of `iteration` into `out` (cleared first). Power is in units of
@@ -32,10 +47,12 @@ pub fn trace_photons(
     iteration: u64,
     count: u64,
     max_depth: u32,
+    record: VolumeRecord,
     out: &mut PhotonBuffers,
 ) {
     out.surface.clear();
     out.volume.clear();
+    out.beams.clear();
     if scene.light_selection.is_empty() {
         return;
     }
@@ -44,7 +61,15 @@ pub fn trace_photons(
         .map(|c| {
             let mut v = PhotonBuffers::default();
             for j in c * CHUNK..((c + 1) * CHUNK).min(count) {
-                trace_one(scene, seed, iteration, j, max_depth, &mut v);
+                trace_one(
+                    scene,
+                    seed,
+                    iteration,
+                    j,
+                    max_depth,
+                    record_of(record, count, j),
+                    &mut v,
+                );
             }
             v
         })
@@ -52,6 +77,25 @@ pub fn trace_photons(
     for c in chunks {
         out.surface.extend_from_slice(&c.surface);
         out.volume.extend_from_slice(&c.volume);
+        out.beams.extend_from_slice(&c.beams);
+    }
+}
+
+/// What one photon keeps in media.
+#[derive(Clone, Copy, PartialEq)]
+enum Keep {
+    Nothing,
+    Points,
+    /// Beams, with their power times this scale.
+    Beams(f32),
+}
+
+/// What photon `j` of `count` keeps in media.
+fn record_of(record: VolumeRecord, count: u64, j: u64) -> Keep {
+    match record {
+        VolumeRecord::Points => Keep::Points,
+        VolumeRecord::Beams(n) if j < n => Keep::Beams(count as f32 / n.min(count) as f32),
+        VolumeRecord::Beams(_) => Keep::Nothing,
     }
 }
 
@@ -61,7 +105,15 @@ pub fn power_unit(scene: &Scene, count: u64) -> f32 {
     scene.light_selection.total() / count as f32
 }
 
-fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u32, out: &mut PhotonBuffers) {
+fn trace_one(
+    scene: &Scene,
+    seed: u64,
+    iteration: u64,
+    index: u64,
+    max_depth: u32,
+    keep: Keep,
+    out: &mut PhotonBuffers,
+) {
     let mut s = Sampler::new(seed, Stream::Photon, iteration, index);
     let (light, pmf, _) = scene.light_selection.sample(s.next_1d());
     let u_pos = s.next_2d();
@@ -77,13 +129,28 @@ fn trace_one(scene: &Scene, seed: u64, iteration: u64, index: u64, max_depth: u3
         offset_ray_origin(e.origin, e.origin_err, e.n, e.dir)
     };
     let mut walk = Walk::new(Ray::new(origin, e.dir), beta, scene.light_media[light]);
+    let beams = &mut out.beams;
     while walk.depth < max_depth {
-        match walk.next_event(scene, &mut s) {
+        // As on surfaces, the first flight and collision are direct light, sampled by the
+        // camera.
+        let event = walk.next_event_tracing(scene, &mut s, |w, medium, length| {
+            if let Keep::Beams(scale) = keep
+                && w.depth > 0
+            {
+                beams.push(BeamSegment {
+                    origin: w.ray.o,
+                    direction: w.ray.d,
+                    length,
+                    power: w.beta * scale,
+                    medium,
+                });
+            }
+        });
+        match event {
             Event::Gone => return,
             Event::Medium { p, medium, weight } => {
                 walk.beta *= weight;
-                // As on surfaces, the first collision is direct light, sampled by the camera.
-                if walk.depth > 0 {
+                if walk.depth > 0 && keep == Keep::Points {
                     out.volume.push(Photon::new(p, -walk.ray.d, walk.beta));
                 }
                 let Some(weight) = photon_roulette(scene.media[medium as usize].albedo, &mut s) else {
