@@ -240,7 +240,8 @@ pub struct JobArgs {
     /// sampler sample_count (`render`: no limit when --time-limit is given).
     #[arg(long)]
     pub iterations: Option<u64>,
-    /// SPPM: photons emitted per iteration [default: the scene's photon_count, else 200000].
+    /// SPPM: photons emitted per iteration [default: the scene's photon_count, else a quarter
+    /// of the pixels, at least 4096].
     #[arg(long)]
     pub photons: Option<u64>,
     /// SPPM: initial gather radius in scene units [default: the scene's initial_radius, else
