@@ -19,7 +19,7 @@ use axum::{Json, Router};
 use photonfarm::bundle::BundleError;
 use photonfarm::compression::{self, CompressionError, Encoding};
 use photonfarm::job::JobSettings;
-use photonfarm::protocol::{LEASE_KEY_HEADER, LeaseRequest, Release, decode_result, max_encoded_batch};
+use photonfarm::protocol::{LeaseRequest, Release, decode_result, max_encoded_batch};
 use photonfarm::render::Method;
 use serde_json::json;
 use sha2::{Digest, Sha256};
@@ -29,7 +29,7 @@ use tokio::sync::Semaphore;
 use crate::accumulator::Accumulator;
 use crate::admission::Admission;
 use crate::farm::{Committed, Farm, FarmError};
-use crate::result_body::{BodyError, read_result_body};
+use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use crate::scene_check::{CheckError, check_in_child};
 use crate::store::Layout;
 
@@ -209,14 +209,6 @@ async fn body_bytes(req: Request, state: &Arc<AppState>) -> ApiResult<Bytes> {
 }
 
 /// The lease secret a worker sent.
-fn lease_key(headers: &HeaderMap) -> String {
-    headers
-        .get(LEASE_KEY_HEADER)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("")
-        .to_string()
-}
-
 fn with_farm<T>(state: &AppState, f: impl FnOnce(&mut Farm) -> Result<T, FarmError>) -> ApiResult<T> {
     let mut farm = state.farm.lock().unwrap_or_else(|p| p.into_inner());
     f(&mut farm).map_err(ApiError::from)
@@ -591,12 +583,8 @@ async fn result(
 ) -> ApiResult<Response> {
     let id = parse_id(&id)?;
     let key = lease_key(&headers);
-    let encoding = Encoding::from_header(
-        headers
-            .get(header::CONTENT_ENCODING)
-            .and_then(|v| v.to_str().ok()),
-    )
-    .map_err(|e| ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
+    let encoding = result_encoding(&headers)
+        .map_err(|e| ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     // Refuse a dead lease, or one of another worker, before reading a large body.
     let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
     let max = max_encoded_batch(expected.width, expected.height);

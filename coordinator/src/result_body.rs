@@ -1,12 +1,32 @@
-//! Reading a batch result's body, the same way in the coordinator and in a relay: the size is
-//! bounded before anything is read (by `Content-Length`) and while reading, and the body is held
-//! under one of a limited number of upload slots.
+//! Reading a lease's requests, the same way in the coordinator and in a relay: the lease key and
+//! the result's encoding from the headers, and the result's body, whose size is bounded before
+//! anything is read (by `Content-Length`) and while reading, held under one of a limited number
+//! of upload slots.
 
 use axum::body::Bytes;
 use axum::extract::Request;
 use axum::http::{HeaderMap, header};
-use photonfarm::compression::{self, Encoding};
+use photonfarm::compression::{self, CompressionError, Encoding};
+use photonfarm::protocol::LEASE_KEY_HEADER;
 use tokio::sync::{AcquireError, Semaphore, SemaphorePermit};
+
+/// The lease key a request carries (empty if none: no lease has it).
+pub fn lease_key(headers: &HeaderMap) -> String {
+    headers
+        .get(LEASE_KEY_HEADER)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string()
+}
+
+/// The encoding a result is sent with, from its `Content-Encoding`.
+pub fn result_encoding(headers: &HeaderMap) -> Result<Encoding, CompressionError> {
+    Encoding::from_header(
+        headers
+            .get(header::CONTENT_ENCODING)
+            .and_then(|v| v.to_str().ok()),
+    )
+}
 
 /// Why a result's body was not read.
 #[derive(Debug)]

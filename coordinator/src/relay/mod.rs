@@ -26,7 +26,7 @@ use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post, put};
 use axum::{Json, Router};
-use photonfarm::compression::{self, CompressionError, Encoding};
+use photonfarm::compression::{self, CompressionError};
 use photonfarm::protocol::{
     HeartbeatReply, LEASE_KEY_HEADER, Lease, LeaseRequest, Release, decode_result, encode_batch,
     encode_result, max_encoded_batch,
@@ -35,7 +35,7 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use crate::cli::RelayArgs;
-use crate::result_body::{BodyError, read_result_body};
+use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use book::{Book, PartError};
 
 /// Largest result accepted when the upstream does not say the image size (an older
@@ -179,14 +179,6 @@ fn parse_id(s: &str) -> RelayResult<u64> {
         .map_err(|_| RelayError(StatusCode::NOT_FOUND, format!("\"{s}\" is not an id")))
 }
 
-fn lease_key(headers: &HeaderMap) -> String {
-    headers
-        .get(LEASE_KEY_HEADER)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("")
-        .to_string()
-}
-
 /// `POST /api/lease`: a part of a batch held, or of a new batch leased upstream.
 async fn lease(State(relay): State<Arc<Relay>>, body: Bytes) -> RelayResult<Response> {
     let req: LeaseRequest = serde_json::from_slice(&body)
@@ -287,12 +279,8 @@ async fn result(
 ) -> RelayResult<Response> {
     let id = parse_id(&id)?;
     let key = lease_key(&headers);
-    let encoding = Encoding::from_header(
-        headers
-            .get(header::CONTENT_ENCODING)
-            .and_then(|v| v.to_str().ok()),
-    )
-    .map_err(|e| RelayError(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
+    let encoding = result_encoding(&headers)
+        .map_err(|e| RelayError(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     let info = relay.book().expected(id, &key)?;
     let max = if info.width == 0 {
         UNKNOWN_SIZE_MAX
