@@ -2,6 +2,7 @@
 
 use glam::Vec3A;
 
+use super::bvh4::{self, BinaryTree, WideNode};
 use super::{Aabb, Hit, Primitive, Ray};
 
 const BINS: usize = 16;
@@ -14,9 +15,10 @@ const TRAVERSAL_COST: f32 = 1.0;
 /// geometry (the SAH alone peels one primitive per level off nested sizes in a progression).
 const SAH_DEPTH: usize = 32;
 /// Traversal stack entries: one per level of the deepest possible tree.
-const STACK: usize = SAH_DEPTH + 32;
+pub(super) const STACK: usize = SAH_DEPTH + 32;
 
-/// One node of the flattened tree. Interior nodes keep their first child right after them.
+/// One node of the binary tree the build makes (traversal uses its collapse into
+/// [`WideNode`]s). Interior nodes keep their first child right after them.
 #[derive(Clone, Copy, Debug)]
 struct Node {
     bounds: Aabb,
@@ -24,8 +26,6 @@ struct Node {
     offset: u32,
     /// Leaf: primitive count (> 0). Interior: 0.
     count: u16,
-    /// Interior: split axis, which orders the children front to back during traversal.
-    axis: u8,
 }
 
 /// Which traversal structure a [`Bvh`] uses.
@@ -46,7 +46,7 @@ pub enum Backend {
 enum Accel {
     #[default]
     Empty,
-    Own(Vec<Node>),
+    Own(Vec<WideNode>),
     #[cfg(feature = "obvhs")]
     Cw(Box<obvhs::cwbvh::CwBvh>),
     #[cfg(feature = "obvhs")]
@@ -138,7 +138,7 @@ impl Bvh {
             .map(|it| slots[it.index].take().expect("each primitive is placed once"))
             .collect();
         Bvh {
-            accel: Accel::Own(nodes),
+            accel: Accel::Own(bvh4::collapse(&Binary(&nodes))),
             prims,
             bounds,
         }
@@ -198,47 +198,40 @@ impl Bvh {
     #[inline]
     fn traverse(
         &self,
-        nodes: &[Node],
+        nodes: &[WideNode],
         ray: &Ray,
         t_max: &mut f32,
         mut on_hit: impl FnMut(u32, f32, f32, f32) -> bool,
     ) {
-        let inv_d = Vec3A::ONE / ray.d;
-        let neg = [inv_d.x < 0.0, inv_d.y < 0.0, inv_d.z < 0.0];
-        let mut stack = [0u32; STACK];
-        let mut sp = 0usize;
-        let mut current = 0u32;
-        loop {
-            let node = &nodes[current as usize];
-            if node.bounds.hit(ray, inv_d, *t_max) {
-                if node.count > 0 {
-                    let first = node.offset as usize;
-                    for i in first..first + node.count as usize {
-                        if let Some((t, b1, b2)) = self.prims[i].intersect(ray, *t_max) {
-                            *t_max = t;
-                            if on_hit(i as u32, t, b1, b2) {
-                                return;
-                            }
-                        }
+        bvh4::traverse(nodes, ray, t_max, |first, count, t_max| {
+            for i in first as usize..(first + count) as usize {
+                if let Some((t, b1, b2)) = self.prims[i].intersect(ray, *t_max) {
+                    *t_max = t;
+                    if on_hit(i as u32, t, b1, b2) {
+                        return true;
                     }
-                } else {
-                    let (near, far) = if neg[node.axis as usize] {
-                        (node.offset, current + 1)
-                    } else {
-                        (current + 1, node.offset)
-                    };
-                    stack[sp] = far;
-                    sp += 1;
-                    current = near;
-                    continue;
                 }
             }
-            if sp == 0 {
-                return;
-            }
-            sp -= 1;
-            current = stack[sp];
-        }
+            false
+        });
+    }
+}
+
+/// The binary tree as [`build_node`] lays it out, for [`bvh4::collapse`].
+struct Binary<'a>(&'a [Node]);
+
+impl BinaryTree for Binary<'_> {
+    fn bounds(&self, i: u32) -> Aabb {
+        self.0[i as usize].bounds
+    }
+
+    fn leaf(&self, i: u32) -> Option<(u32, u32)> {
+        let n = &self.0[i as usize];
+        (n.count > 0).then_some((n.offset, n.count as u32))
+    }
+
+    fn children(&self, i: u32) -> [u32; 2] {
+        [i + 1, self.0[i as usize].offset]
     }
 }
 
@@ -392,7 +385,6 @@ fn make_leaf(items: &[BuildItem], first: usize, bounds: Aabb) -> Node {
         bounds,
         offset: first as u32,
         count: items.len() as u16,
-        axis: 0,
     }
 }
 
@@ -436,7 +428,6 @@ fn build_node(items: &mut [BuildItem], first: usize, depth: usize, nodes: &mut V
         bounds,
         offset: 0,
         count: 0,
-        axis: axis as u8,
     });
     let (left, right) = items.split_at_mut(mid);
     build_node(left, first, depth + 1, nodes);
@@ -519,16 +510,6 @@ mod tests {
             .collect()
     }
 
-    /// Depth of the deepest leaf.
-    fn depth(nodes: &[Node], node: usize) -> usize {
-        let n = &nodes[node];
-        if n.count > 0 {
-            0
-        } else {
-            1 + depth(nodes, node + 1).max(depth(nodes, n.offset as usize))
-        }
-    }
-
     /// Every backend this build has.
     fn backends() -> Vec<Backend> {
         #[allow(unused_mut)]
@@ -569,7 +550,7 @@ mod tests {
         for backend in backends() {
             let bvh = Bvh::build_with(prims.clone(), backend);
             if let Accel::Own(nodes) = &bvh.accel {
-                let d = depth(nodes, 0);
+                let d = bvh4::depth(nodes, 0);
                 assert!(d < STACK, "depth {d}");
             }
             let mut s = Sampler::new(5, Stream::Camera, 0, 0);

@@ -2,6 +2,7 @@
 
 mod aabb;
 mod bvh;
+mod bvh4;
 mod frame;
 mod ray;
 mod sphere;

@@ -1,0 +1,193 @@
+//! Four-wide nodes collapsed from the binary SAH tree, each tested against a ray with one SIMD
+//! slab test over its four children's boxes.
+//!
+//! Why: on the Cornell box a binary node visit was most of a ray's cost, one box per load and
+//! per branch; four boxes in structure-of-arrays lanes cost about as much as one. The binary
+//! tree stays the build's output (its SAH and depth bound are unchanged); this is only its
+//! traversal layout.
+
+use arrayvec::ArrayVec;
+use glam::{Vec3A, Vec4};
+
+use super::{Aabb, Ray, gamma};
+
+/// Entries of the traversal stack. A wide node is never deeper than the binary node it was
+/// collapsed from (`super::bvh::STACK` levels at most), and each visit pushes at most three
+/// entries more than it pops.
+pub(super) const WIDE_STACK: usize = 3 * super::bvh::STACK + 1;
+
+/// A node of the binary tree as the build leaves it, read by [`collapse`].
+pub(super) trait BinaryTree {
+    /// Bounds of node `i`.
+    fn bounds(&self, i: u32) -> Aabb;
+    /// `Some((first, count))` for a leaf, `None` for an interior node.
+    fn leaf(&self, i: u32) -> Option<(u32, u32)>;
+    /// The two children of interior node `i`.
+    fn children(&self, i: u32) -> [u32; 2];
+}
+
+/// Up to four children: boxes in SIMD lanes, then what each child is.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub(super) struct WideNode {
+    min_x: Vec4,
+    min_y: Vec4,
+    min_z: Vec4,
+    max_x: Vec4,
+    max_y: Vec4,
+    max_z: Vec4,
+    /// Interior child: its wide node's index. Leaf child: its first primitive.
+    child: [u32; 4],
+    /// Leaf child: its primitive count (> 0). Interior child: 0.
+    count: [u32; 4],
+    /// Lanes that hold a child, as a bit mask (empty lanes' boxes are never tested in).
+    used: u32,
+}
+
+/// What the traversal does next: a wide node to test, or a leaf's primitives.
+#[derive(Clone, Copy)]
+struct Entry {
+    /// Entry distance of the child's box: skipped when something nearer has been hit since.
+    t: f32,
+    child: u32,
+    count: u32,
+}
+
+impl WideNode {
+    fn empty() -> WideNode {
+        WideNode {
+            min_x: Vec4::ZERO,
+            min_y: Vec4::ZERO,
+            min_z: Vec4::ZERO,
+            max_x: Vec4::ZERO,
+            max_y: Vec4::ZERO,
+            max_z: Vec4::ZERO,
+            child: [0; 4],
+            count: [0; 4],
+            used: 0,
+        }
+    }
+
+    fn set(&mut self, lane: usize, b: Aabb, child: u32, count: u32) {
+        self.min_x[lane] = b.min.x;
+        self.min_y[lane] = b.min.y;
+        self.min_z[lane] = b.min.z;
+        self.max_x[lane] = b.max.x;
+        self.max_y[lane] = b.max.y;
+        self.max_z[lane] = b.max.z;
+        self.child[lane] = child;
+        self.count[lane] = count;
+        self.used |= 1 << lane;
+    }
+}
+
+/// Collapses the binary tree rooted at node 0 into wide nodes (the root is wide node 0): each
+/// wide node takes a binary node's children and keeps opening its largest interior child
+/// (by surface area, the SAH's measure) until it has four.
+pub(super) fn collapse(tree: &impl BinaryTree) -> Vec<WideNode> {
+    let mut nodes = vec![WideNode::empty()];
+    if let Some((first, count)) = tree.leaf(0) {
+        nodes[0].set(0, tree.bounds(0), first, count);
+        return nodes;
+    }
+    // (wide node to fill, binary interior node whose subtree it holds)
+    let mut todo = vec![(0usize, 0u32)];
+    while let Some((wide, binary)) = todo.pop() {
+        let mut kids: Vec<u32> = tree.children(binary).to_vec();
+        while kids.len() < 4 {
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|&(_, &k)| tree.leaf(k).is_none())
+                .max_by(|a, b| {
+                    tree.bounds(*a.1)
+                        .surface_area()
+                        .total_cmp(&tree.bounds(*b.1).surface_area())
+                })
+                .map(|(i, _)| i);
+            let Some(i) = open else { break };
+            let k = kids.remove(i);
+            kids.splice(i..i, tree.children(k));
+        }
+        for (lane, &k) in kids.iter().enumerate() {
+            match tree.leaf(k) {
+                Some((first, count)) => nodes[wide].set(lane, tree.bounds(k), first, count),
+                None => {
+                    let index = nodes.len();
+                    nodes.push(WideNode::empty());
+                    nodes[wide].set(lane, tree.bounds(k), index as u32, 0);
+                    todo.push((index, k));
+                }
+            }
+        }
+    }
+    nodes
+}
+
+/// Front-to-back traversal of `nodes`: `test(first, count, t_max)` tests a leaf's primitives,
+/// shrinking `t_max` to any hit, and returns true to stop.
+#[inline]
+pub(super) fn traverse(
+    nodes: &[WideNode],
+    ray: &Ray,
+    t_max: &mut f32,
+    mut test: impl FnMut(u32, u32, &mut f32) -> bool,
+) {
+    let inv_d = Vec3A::ONE / ray.d;
+    let (ox, oy, oz) = (Vec4::splat(ray.o.x), Vec4::splat(ray.o.y), Vec4::splat(ray.o.z));
+    let (ix, iy, iz) = (Vec4::splat(inv_d.x), Vec4::splat(inv_d.y), Vec4::splat(inv_d.z));
+    // As `Aabb::hit`: the far bound is widened by 2γ(3) so that rounding never loses a grazing hit.
+    let widen = Vec4::splat(1.0 + 2.0 * gamma(3));
+    // Not zeroed: a ray's stack is written as it is used (zeroing it cost 8% of a path).
+    let mut stack = ArrayVec::<Entry, WIDE_STACK>::new();
+    stack.push(Entry {
+        t: 0.0,
+        child: 0,
+        count: 0,
+    });
+    while let Some(e) = stack.pop() {
+        if e.t > *t_max {
+            continue;
+        }
+        if e.count > 0 {
+            if test(e.child, e.count, t_max) {
+                return;
+            }
+            continue;
+        }
+        let n = &nodes[e.child as usize];
+        let (tx0, tx1) = ((n.min_x - ox) * ix, (n.max_x - ox) * ix);
+        let (ty0, ty1) = ((n.min_y - oy) * iy, (n.max_y - oy) * iy);
+        let (tz0, tz1) = ((n.min_z - oz) * iz, (n.max_z - oz) * iz);
+        let near = tx0.min(tx1).max(ty0.min(ty1)).max(tz0.min(tz1)).max(Vec4::ZERO);
+        let far = tx0.max(tx1).min(ty0.max(ty1)).min(tz0.max(tz1)) * widen;
+        let mut hit = near.cmple(far.min(Vec4::splat(*t_max))).bitmask() & n.used;
+        // Push the hit children far to near, so that the nearest is tested first.
+        let base = stack.len();
+        while hit != 0 {
+            let lane = hit.trailing_zeros() as usize;
+            hit &= hit - 1;
+            stack.push(Entry {
+                t: near[lane],
+                child: n.child[lane],
+                count: n.count[lane],
+            });
+            let mut i = stack.len() - 1;
+            while i > base && stack[i - 1].t < stack[i].t {
+                stack.swap(i - 1, i);
+                i -= 1;
+            }
+        }
+    }
+}
+
+/// Interior levels below `node`: the traversal stack must hold three entries per level.
+#[cfg(test)]
+pub(super) fn depth(nodes: &[WideNode], node: usize) -> usize {
+    let n = &nodes[node];
+    (0..4)
+        .filter(|&lane| n.used & (1 << lane) != 0 && n.count[lane] == 0)
+        .map(|lane| 1 + depth(nodes, n.child[lane] as usize))
+        .max()
+        .unwrap_or(0)
+}
