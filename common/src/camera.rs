@@ -50,8 +50,8 @@ impl Camera {
         };
         let near_t = self.near_clip / d_local.z;
         let o_local = o_local + d_local * near_t;
-        let o = Vec3A::from(self.to_world.transform_point3(o_local.into()));
-        let dir = Vec3A::from(self.to_world.transform_vector3(d_local.into())).normalize();
+        let o = self.to_world.transform_point3a(o_local);
+        let dir = self.to_world.transform_vector3a(d_local).normalize();
         Ray::new(o, dir)
     }
 }

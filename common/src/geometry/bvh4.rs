@@ -191,3 +191,113 @@ pub(super) fn depth(nodes: &[WideNode], node: usize) -> usize {
         .max()
         .unwrap_or(0)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3A;
+
+    /// A binary tree over `n` unit boxes on a line, split by count: leaves of one or two.
+    struct Line(Vec<(Aabb, Option<(u32, u32)>, [u32; 2])>);
+
+    impl Line {
+        fn new(n: u32) -> Line {
+            let mut nodes = Vec::new();
+            Self::build(&mut nodes, 0, n);
+            Line(nodes)
+        }
+
+        fn build(nodes: &mut Vec<(Aabb, Option<(u32, u32)>, [u32; 2])>, first: u32, count: u32) -> u32 {
+            let bounds = Aabb {
+                min: Vec3A::new(first as f32, 0.0, 0.0),
+                max: Vec3A::new((first + count) as f32, 1.0, 1.0),
+            };
+            let index = nodes.len() as u32;
+            nodes.push((bounds, None, [0, 0]));
+            if count <= 2 {
+                nodes[index as usize].1 = Some((first, count));
+            } else {
+                let half = count / 2;
+                let a = Self::build(nodes, first, half);
+                let b = Self::build(nodes, first + half, count - half);
+                nodes[index as usize].2 = [a, b];
+            }
+            index
+        }
+    }
+
+    impl BinaryTree for Line {
+        fn bounds(&self, i: u32) -> Aabb {
+            self.0[i as usize].0
+        }
+        fn leaf(&self, i: u32) -> Option<(u32, u32)> {
+            self.0[i as usize].1
+        }
+        fn children(&self, i: u32) -> [u32; 2] {
+            self.0[i as usize].2
+        }
+    }
+
+    #[test]
+    fn collapse_keeps_every_leaf_once_and_fills_nodes() {
+        for n in [1, 2, 3, 5, 8, 17, 100] {
+            let wide = collapse(&Line::new(n));
+            let mut seen = vec![0; n as usize];
+            let mut interior_refs = vec![0; wide.len()];
+            for node in &wide {
+                assert!(node.used != 0 && node.used.count_ones() <= 4);
+                for lane in (0..4).filter(|&l| node.used & (1 << l) != 0) {
+                    if node.count[lane] > 0 {
+                        for p in node.child[lane]..node.child[lane] + node.count[lane] {
+                            seen[p as usize] += 1;
+                        }
+                    } else {
+                        interior_refs[node.child[lane] as usize] += 1;
+                    }
+                }
+            }
+            assert!(seen.iter().all(|&s| s == 1), "{n} boxes: {seen:?}");
+            // Every wide node but the root is some node's child, once.
+            assert_eq!(interior_refs[0], 0);
+            assert!(interior_refs[1..].iter().all(|&r| r == 1));
+            // Wide nodes are full wherever the binary tree had enough below them.
+            if n >= 8 {
+                assert_eq!(wide[0].used.count_ones(), 4);
+            }
+            // Four children per node: at most half as many levels as the binary tree's.
+            let binary_depth = (n as f32 / 2.0).log2().ceil() as usize;
+            assert!(
+                depth(&wide, 0) <= binary_depth.div_ceil(2),
+                "{n}: {}",
+                depth(&wide, 0)
+            );
+        }
+    }
+
+    #[test]
+    fn a_ray_finds_the_nearest_leaf_first() {
+        let line = Line::new(100);
+        let mut leaves: Vec<u32> = line.0.iter().filter_map(|n| n.1.map(|l| l.0)).collect();
+        leaves.sort();
+        let wide = collapse(&line);
+        // Along +x every leaf is hit, nearest first.
+        let ray = Ray::new(Vec3A::new(-1.0, 0.5, 0.5), Vec3A::X);
+        let mut order = Vec::new();
+        let mut t_max = f32::INFINITY;
+        traverse(&wide, &ray, &mut t_max, |first, _, _| {
+            order.push(first);
+            false
+        });
+        assert_eq!(order, leaves);
+        // From the far end, a hit inside the first leaf reached ends the search: the next leaf
+        // starts beyond it.
+        let back = Ray::new(Vec3A::new(101.0, 0.5, 0.5), -Vec3A::X);
+        order.clear();
+        traverse(&wide, &back, &mut t_max, |first, count, t_max| {
+            order.push(first);
+            *t_max = 101.0 - (first + count) as f32 + 0.5;
+            false
+        });
+        assert_eq!(order, vec![*leaves.last().unwrap()]);
+    }
+}
