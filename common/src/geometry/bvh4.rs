@@ -197,8 +197,11 @@ mod tests {
     use super::*;
     use glam::Vec3A;
 
+    /// A binary node: bounds, leaf (first, count), children.
+    type LineNode = (Aabb, Option<(u32, u32)>, [u32; 2]);
+
     /// A binary tree over `n` unit boxes on a line, split by count: leaves of one or two.
-    struct Line(Vec<(Aabb, Option<(u32, u32)>, [u32; 2])>);
+    struct Line(Vec<LineNode>);
 
     impl Line {
         fn new(n: u32) -> Line {
@@ -207,7 +210,7 @@ mod tests {
             Line(nodes)
         }
 
-        fn build(nodes: &mut Vec<(Aabb, Option<(u32, u32)>, [u32; 2])>, first: u32, count: u32) -> u32 {
+        fn build(nodes: &mut Vec<LineNode>, first: u32, count: u32) -> u32 {
             let bounds = Aabb {
                 min: Vec3A::new(first as f32, 0.0, 0.0),
                 max: Vec3A::new((first + count) as f32, 1.0, 1.0),
