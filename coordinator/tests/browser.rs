@@ -127,15 +127,7 @@ fn submit(url: &str, job: &[&str]) -> u64 {
 }
 
 async fn api(url: &str, path: &str) -> Value {
-    reqwest::Client::new()
-        .get(format!("{url}{path}"))
-        .bearer_auth(TOKEN)
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap()
+    support::get_json(url, path, TOKEN).await
 }
 
 /// Clicks the element with id `id`.

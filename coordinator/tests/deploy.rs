@@ -66,17 +66,7 @@ fn the_slurm_array_script_starts_a_worker_that_reaches_the_coordinator() {
         .build()
         .unwrap();
     let names = loop {
-        let v: Value = rt.block_on(async {
-            reqwest::Client::new()
-                .get(format!("{url}/api/workers"))
-                .bearer_auth("t0k")
-                .send()
-                .await
-                .unwrap()
-                .json()
-                .await
-                .unwrap()
-        });
+        let v: Value = rt.block_on(support::get_json(&url, "/api/workers", "t0k"));
         let names: Vec<String> = v["workers"]
             .as_array()
             .unwrap()

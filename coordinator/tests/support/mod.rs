@@ -126,3 +126,16 @@ pub fn worker_with_env(url: &str, name: &str, cache: &Path, env: &[(&str, &str)]
             .unwrap(),
     )
 }
+
+/// `GET url + path` with a bearer token, as JSON: the tests' read-only look at the API.
+pub async fn get_json(url: &str, path: &str, token: &str) -> serde_json::Value {
+    reqwest::Client::new()
+        .get(format!("{url}{path}"))
+        .bearer_auth(token)
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap()
+}
