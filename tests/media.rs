@@ -218,7 +218,7 @@ fn split_and_merge_is_bit_exact_in_fog() {
 /// medium seen through glass (the beam caustic). Each estimate renders with its defaults; its
 /// noise is the mean squared difference of two renders with different seeds, over two (its
 /// variance). The beam estimate must be the less noisy, and its channel means within 3% of an
-/// unbiased one: the path tracer's in fog, and through glass (which the path tracer cannot
+/// unbiased one: Mitsuba's (the fog reference) or the path tracer's in fog, and through glass (which the path tracer cannot
 /// render) the point estimate's with the same radius, whose expectation the beam's equals by
 /// construction. In the dense medium few photons reach what the camera sees (the light is 10
 /// mean free paths away), so every pixel shares the same few photons and the means of both
@@ -269,7 +269,11 @@ fn volume_estimates_in_thin_dense_and_glass_seen_media() {
             let (ma, mb) = (channel_means(&a), channel_means(&b));
             means.push([0, 1, 2].map(|c| 0.5 * (ma[c] + mb[c])));
         }
-        let unbiased = if path == fog.as_path() {
+        let unbiased = if name == "fog (light inside)" {
+            // Mitsuba's volpath reference: a point-like light inside the fog gives a path
+            // tracer rare fireflies, which move the means of 8192 spp at 32×32 by up to 2%.
+            channel_means(&reference("fog.exr"))
+        } else if path == fog.as_path() {
             channel_means(&render_path(&scene, 8192, 3).image().unwrap())
         } else {
             let beam = sppm_settings(&scene, 20_000);
@@ -277,7 +281,10 @@ fn volume_estimates_in_thin_dense_and_glass_seen_media() {
                 volume_estimate: VolumeEstimate::Point,
                 ..beam
             };
-            channel_means(&render(point, 3))
+            // Over four seeds: one point render is noisy enough (variance 2.6e-3 a pixel
+            // here) to move its own means by a few percent.
+            let m: Vec<[f64; 3]> = (3..7).map(|seed| channel_means(&render(point, seed))).collect();
+            [0, 1, 2].map(|c| m.iter().map(|m| m[c]).sum::<f64>() / m.len() as f64)
         };
         let error = |m: &[f64; 3]| {
             (0..3)

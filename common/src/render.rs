@@ -172,7 +172,9 @@ fn add_pixel_samples(
     let w = scene.width();
     let sample = |x: u32, y: u32| -> (Rgb, Vec2) {
         let pixel = y as u64 * w as u64 + x as u64;
-        let mut sampler = Sampler::new(seed, Stream::Camera, pass, pixel);
+        // Even and odd passes are two independent sequences (of `pass / 2`), so the noise
+        // estimate's halves stay independent (`parity.rs`).
+        let mut sampler = Sampler::sobol(seed, Stream::Camera, 2 * pixel + pass % 2, pass / 2);
         let u_pixel = sampler.next_2d();
         let ray = scene.camera.generate_ray(x, y, u_pixel, sampler.next_2d());
         (radiance(ray, &mut sampler), u_pixel)

@@ -23,7 +23,26 @@ pub enum Stream {
 /// One path's random numbers.
 pub struct Sampler {
     rng: Pcg32,
+    /// For [`Sampler::sobol`]: the dimensions of one point of an Owen-scrambled Sobol sequence
+    /// come first, then `rng`.
+    sobol: Option<SobolPoint>,
 }
+
+/// One point of a scrambled Sobol sequence, read one dimension at a time.
+struct SobolPoint {
+    /// Index in the sequence (below 2^16).
+    index: u32,
+    /// Which scramble: independent sequences for different keys.
+    scramble: u32,
+    /// Next dimension to hand out.
+    dim: u32,
+    /// Dimensions `dim & !3` to `(dim & !3) + 3`, computed four at a time.
+    four: [f32; 4],
+}
+
+/// Points of one scrambled Sobol sequence: the crate's limit. Longer runs continue in a sequence
+/// of another scramble, block by block.
+const SOBOL_POINTS: u64 = 1 << 16;
 
 /// SplitMix64's finaliser: a bijective mix, so distinct keys never share a state.
 fn mix64(mut z: u64) -> u64 {
@@ -41,12 +60,45 @@ impl Sampler {
         let inc = mix64(state ^ 0x9e37_79b9_7f4a_7c15);
         Sampler {
             rng: Pcg32::new(state, inc),
+            sobol: None,
         }
+    }
+
+    /// Sample `sample` of the low-discrepancy sequence `key` (of kind `stream`, under `seed`):
+    /// its first 256 numbers are the dimensions of point `sample` of an Owen-scrambled Sobol
+    /// sequence (Burley's hash-based scrambling, the `sobol_burley` crate), the rest come from
+    /// [`Sampler::new`]'s stream for the same key.
+    ///
+    /// Why: the samples of one sequence fill the space of random numbers evenly, so pixels that
+    /// take their passes as samples of one sequence, or photons of one iteration, converge
+    /// faster than with independent numbers, and stay unbiased. A sample depends only on its key
+    /// and index, so any machine renders any pass or photon to the same bits.
+    pub fn sobol(seed: u64, stream: Stream, key: u64, sample: u64) -> Self {
+        let mut s = Sampler::new(seed, stream, sample, key);
+        let block = sample / SOBOL_POINTS;
+        let scramble = mix64(mix64(seed ^ mix64(stream as u64 + 16)) ^ key.rotate_left(29) ^ block);
+        s.sobol = Some(SobolPoint {
+            index: (sample % SOBOL_POINTS) as u32,
+            scramble: (scramble >> 32) as u32 ^ scramble as u32,
+            dim: 0,
+            four: [0.0; 4],
+        });
+        s
     }
 
     /// A uniform number in [0, 1).
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
+        if let Some(p) = &mut self.sobol
+            && p.dim < sobol_burley::NUM_DIMENSIONS
+        {
+            if p.dim % 4 == 0 {
+                p.four = sobol_burley::sample_4d(p.index, p.dim / 4, p.scramble);
+            }
+            let x = p.four[(p.dim % 4) as usize];
+            p.dim += 1;
+            return x;
+        }
         // 24 bits: every value is exactly representable and strictly below 1.
         (self.rng.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
     }

@@ -114,7 +114,7 @@ fn trace_one(
     keep: Keep,
     out: &mut PhotonBuffers,
 ) {
-    let mut s = Sampler::new(seed, Stream::Photon, iteration, index);
+    let mut s = Sampler::sobol(seed, Stream::Photon, iteration, index);
     let (light, pmf, _) = scene.light_selection.sample(s.next_1d());
     let u_pos = s.next_2d();
     let u_dir = s.next_2d();
