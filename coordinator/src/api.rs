@@ -208,7 +208,6 @@ async fn body_bytes(req: Request, state: &Arc<AppState>) -> ApiResult<Bytes> {
         .map_err(|e| ApiError::new(e.status(), e.body_text()))
 }
 
-/// The lease secret a worker sent.
 fn with_farm<T>(state: &AppState, f: impl FnOnce(&mut Farm) -> Result<T, FarmError>) -> ApiResult<T> {
     let mut farm = state.farm.lock().unwrap_or_else(|p| p.into_inner());
     f(&mut farm).map_err(ApiError::from)

@@ -1,7 +1,5 @@
 use glam::Vec3A;
 
-use super::Ray;
-
 /// An axis-aligned box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
@@ -68,16 +66,5 @@ impl Aabb {
     pub fn surface_area(&self) -> f32 {
         let e = self.extent();
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
-    }
-
-    /// Slab test against a ray with precomputed reciprocal direction.
-    #[inline]
-    pub fn hit(&self, ray: &Ray, inv_d: Vec3A, t_max: f32) -> bool {
-        let t0 = (self.min - ray.o) * inv_d;
-        let t1 = (self.max - ray.o) * inv_d;
-        let t_near = t0.min(t1).max_element().max(0.0);
-        // Widen the far bound by 2γ(3) so that rounding never loses a grazing hit.
-        let t_far = t0.max(t1).min_element() * (1.0 + 2.0 * super::gamma(3));
-        t_near <= t_far.min(t_max)
     }
 }

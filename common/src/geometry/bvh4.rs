@@ -136,7 +136,7 @@ pub(super) fn traverse(
     let inv_d = Vec3A::ONE / ray.d;
     let (ox, oy, oz) = (Vec4::splat(ray.o.x), Vec4::splat(ray.o.y), Vec4::splat(ray.o.z));
     let (ix, iy, iz) = (Vec4::splat(inv_d.x), Vec4::splat(inv_d.y), Vec4::splat(inv_d.z));
-    // As `Aabb::hit`: the far bound is widened by 2γ(3) so that rounding never loses a grazing hit.
+    // The far bound is widened by 2γ(3) so that rounding never loses a grazing hit.
     let widen = Vec4::splat(1.0 + 2.0 * gamma(3));
     // Not zeroed: a ray's stack is written as it is used (zeroing it cost 8% of a path).
     let mut stack = ArrayVec::<Entry, WIDE_STACK>::new();
