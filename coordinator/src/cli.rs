@@ -228,8 +228,8 @@ impl VolumeEstimateArg {
 pub struct JobArgs {
     /// The Mitsuba 3 XML scene file.
     pub scene: PathBuf,
-    /// Rendering method [default: the scene's <integrator>: path, volpath and ptracer render
-    /// with path, direct with direct, sppm with sppm; path if it has none].
+    /// Rendering method [default: the scene's <integrator>: path and volpath render with
+    /// path, direct with direct, sppm and ptracer with sppm; path if it has none].
     #[arg(long, value_enum)]
     pub integrator: Option<Integrator>,
     /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count

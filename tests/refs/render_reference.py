@@ -2,7 +2,7 @@
 """Renders a reference image for an accuracy test with Mitsuba 3, an independent renderer.
 
 Not run by CI: references are rendered once and checked in beside their scene. Mitsuba comes from
-PyPI into a local virtual environment (see `tests/refs/README.md`):
+PyPI into a local virtual environment:
 
     python3 -m venv .mitsuba && .mitsuba/bin/pip install mitsuba numpy
     DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \
