@@ -156,7 +156,7 @@ def main():
         spp_ratio = (path["spp"] / mi_path["spp"]) if "error" not in path and "error" not in mi_path and path["spp"] else float("nan")
         print(f"| {name} | {cell(path)} | {cell(sppm)} | {cell(mi_r)} | {ratio:.2f} | {spp_ratio:.2f} |", flush=True)
         for r, m in zip(runs, methods):
-            if len(methods) > 1 and r is not mi_r:
+            if r is not mi_r:
                 print(f"|   (Mitsuba's {m}: {cell(r)}) | | | | | |", flush=True)
 
 

@@ -72,8 +72,8 @@ impl Sampler {
 
     /// Sample `sample` of the low-discrepancy sequence `key` (of kind `stream`, under `seed`):
     /// its first [`SOBOL_DIMENSIONS`] numbers are the dimensions of point `sample` of an
-    /// Owen-scrambled Sobol sequence (Burley's hash-based scrambling, the `sobol_burley` crate), the rest come from
-    /// [`Sampler::new`]'s stream for the same key.
+    /// Owen-scrambled Sobol sequence (Burley's hash-based scrambling, the `sobol_burley` crate),
+    /// the rest come from [`Sampler::new`]'s stream for the same key.
     ///
     /// Why: the samples of one sequence fill the space of random numbers evenly, so pixels that
     /// take their passes as samples of one sequence, or photons of one iteration, converge

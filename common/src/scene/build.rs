@@ -320,8 +320,7 @@ impl<'a> Builder<'a> {
 
     /// `<integrator>`, reduced to the method of ours that renders it: `path` (Mitsuba's `path`,
     /// `volpath`, `volpathmis`), `direct`, or `sppm` (ours, and Mitsuba's `ptracer` with a
-    /// warning). The wrappers
-    /// `moment` and `aov` render their first nested integrator.
+    /// warning). The wrappers `moment` and `aov` render their first nested integrator.
     fn integrator(&mut self, el: &Element) -> Res<IntegratorDecl> {
         let p = Props::new(self.ctx, el)?;
         let kind = p.kind()?;
