@@ -8,8 +8,10 @@ use glam::{Vec2, Vec3A};
 use super::mis_weight;
 use super::walk::Hit;
 use crate::color::Rgb;
-use crate::geometry::SurfacePoint;
+use crate::geometry::{Ray, SurfacePoint};
 use crate::light::{Light, LightSample};
+use crate::medium::Medium;
+use crate::sampling::{Sampler, sample_equiangular};
 use crate::scene::Scene;
 
 /// Where a path's previous bounce was and how it was sampled.
@@ -119,4 +121,56 @@ pub fn light_in_medium(
         1.0
     };
     tr * ls.radiance * (phase * w / ls.pdf)
+}
+
+/// A collision drawn along `ray.at(0..t_max)` in `medium` for sampling point-like `light`:
+/// equiangularly about it (Kulla and Fajardo 2012), so that its 1/d² falloff is in the density.
+/// Drawn by transmittance instead, a collision near the light gives a sample without bound
+/// (infinite variance for a light inside fog). Returns the distance and the weight σt·Tr/pdf;
+/// None if the light is not point-like or the ray passes through it.
+pub fn equiangular_collision(
+    light: &Light,
+    medium: &Medium,
+    ray: &Ray,
+    t_max: f32,
+    u: f32,
+) -> Option<(f32, Rgb)> {
+    let c = light.point_position()?;
+    let v = c - ray.o;
+    let delta = v.dot(ray.d);
+    let (t, pdf) = sample_equiangular(delta, (v - ray.d * delta).length(), t_max, u)?;
+    Some((t, medium.sigma_t * medium.transmittance(t) / pdf))
+}
+
+/// Light from light `li` (picked with probability `pmf`) scattered back along `ray` at a
+/// collision (`t`, `weight` = σt·Tr/pdf) drawn in medium `m`, per unit throughput at the ray's
+/// origin, with the medium's albedo: the light sample is not weighted against phase sampling
+/// (collisions drawn along a segment are not where the path scatters).
+pub fn scattered_at(
+    scene: &Scene,
+    ray: &Ray,
+    m: u32,
+    (li, pmf): (u32, f32),
+    (t, weight): (f32, Rgb),
+    u: Vec2,
+) -> Rgb {
+    let p = ray.at(t);
+    let ls = scene.sample_picked_light(li, pmf, p, u);
+    weight * scene.media[m as usize].albedo * light_in_medium(scene, p, ray.d, m, ls, 0.0)
+}
+
+/// Point-like lights' share of the light single-scattered back along `ray.at(0..t_max)` in
+/// medium `m`, per unit throughput at the ray's origin, from one light picked as light sampling
+/// picks (zero if it is not point-like) and one collision drawn equiangularly about it. The
+/// path tracer's light sampling at collisions leaves point-like lights to this.
+pub fn point_lights_along(scene: &Scene, ray: &Ray, m: u32, t_max: f32, sampler: &mut Sampler) -> Rgb {
+    let (u_sel, u_t, u_light) = (sampler.next_1d(), sampler.next_1d(), sampler.next_2d());
+    let Some((li, pmf)) = scene.pick_light(u_sel) else {
+        return Rgb::ZERO;
+    };
+    let medium = &scene.media[m as usize];
+    match equiangular_collision(&scene.lights[li as usize], medium, ray, t_max, u_t) {
+        Some(collision) => scattered_at(scene, ray, m, (li, pmf), collision, u_light),
+        None => Rgb::ZERO,
+    }
 }

@@ -94,6 +94,18 @@ impl<'s> Hit<'s> {
     }
 }
 
+/// A stretch of medium along the walk's ray, from the ray's origin: where the free flight ended
+/// (a collision, or the surface) and where the surface is (infinite if there is none).
+#[derive(Clone, Copy, Debug)]
+pub struct Stretch {
+    /// Which medium.
+    pub medium: u32,
+    /// Distance to the flight's end.
+    pub flight: f32,
+    /// Distance to the surface.
+    pub surface: f32,
+}
+
 impl Walk {
     /// A walk starting along `ray` in `medium`, carrying `beta`.
     pub fn new(ray: Ray, beta: Rgb, medium: Option<u32>) -> Walk {
@@ -115,20 +127,26 @@ impl Walk {
         self.next_event_tracing(scene, sampler, |_, _, _| {})
     }
 
-    /// [`Walk::next_event`], calling `stretch(walk, medium, t)` for every stretch of medium the
-    /// flight covers, from the ray's origin to `t` (the collision, or the surface behind), with
-    /// the throughput at the stretch's start: the segments photon beams are made of.
+    /// [`Walk::next_event`], calling `stretch(walk, stretch, sampler)` for every stretch of medium
+    /// the flight covers, with the throughput at the stretch's start: the segments photon beams
+    /// are made of (origin to the collision or the surface), and the segments along which the
+    /// path tracer samples point lights (origin to the surface, wherever the flight ends).
     pub fn next_event_tracing<'s>(
         &mut self,
         scene: &'s Scene,
         sampler: &mut Sampler,
-        mut stretch: impl FnMut(&Walk, u32, f32),
+        mut stretch: impl FnMut(&Walk, Stretch, &mut Sampler),
     ) -> Event<'s> {
         self.advance(scene, |walk, m, t_surface| {
             let med = &scene.media[m as usize];
             match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
                 Flight::Collision { t, weight } => {
-                    stretch(walk, m, t);
+                    let s = Stretch {
+                        medium: m,
+                        flight: t,
+                        surface: t_surface,
+                    };
+                    stretch(walk, s, sampler);
                     Some(Event::Medium {
                         p: walk.ray.at(t),
                         medium: m,
@@ -136,7 +154,12 @@ impl Walk {
                     })
                 }
                 Flight::Passed { weight } => {
-                    stretch(walk, m, t_surface);
+                    let s = Stretch {
+                        medium: m,
+                        flight: t_surface,
+                        surface: t_surface,
+                    };
+                    stretch(walk, s, sampler);
                     walk.beta *= weight;
                     None
                 }

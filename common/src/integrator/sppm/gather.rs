@@ -20,7 +20,7 @@ use crate::color::Rgb;
 use crate::geometry::Ray;
 use crate::integrator::direct;
 use crate::integrator::walk::{Event, Hit, Walk};
-use crate::sampling::{Sampler, sample_equiangular};
+use crate::sampling::Sampler;
 use crate::scene::Scene;
 
 /// What the camera pass needs of the iteration.
@@ -204,22 +204,14 @@ fn beam_estimate(ctx: &GatherContext, ray: &Ray, m: u32, t_max: f32, sampler: &m
     let mut l = Rgb::ZERO;
     if let Some((li, pmf)) = scene.pick_light(u_sel) {
         let light = &scene.lights[li as usize];
-        let equiangular = light.point_position().and_then(|c| {
-            let v = c - ray.o;
-            let delta = v.dot(ray.d);
-            let (t, pdf) = sample_equiangular(delta, (v - ray.d * delta).length(), t_max, u_t)?;
-            Some((t, med.sigma_t * med.transmittance(t) / pdf))
-        });
         // Else by transmittance, within the stretch the light reaches (a beam's cylinder).
-        let collision = equiangular.or_else(|| {
+        let collision = direct::equiangular_collision(light, med, ray, t_max, u_t).or_else(|| {
             let (a, b) = light.lit_span(ray, t_max)?;
             let (t, weight) = med.sample_collision_within(b - a, u_channel, u_t)?;
             Some((a + t, weight * med.transmittance(a)))
         });
-        if let Some((t, weight)) = collision {
-            let p = ray.at(t);
-            let ls = scene.sample_picked_light(li, pmf, p, u_light);
-            l += weight * med.albedo * direct::light_in_medium(scene, p, ray.d, m, ls, 0.0);
+        if let Some(collision) = collision {
+            l += direct::scattered_at(scene, ray, m, (li, pmf), collision, u_light);
         }
     }
     // The roulette: survival S(t) and the distance where it fails.

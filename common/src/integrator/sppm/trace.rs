@@ -133,16 +133,16 @@ fn trace_one(
     while walk.depth < max_depth {
         // As on surfaces, the first flight and collision are direct light, sampled by the
         // camera.
-        let event = walk.next_event_tracing(scene, &mut s, |w, medium, length| {
+        let event = walk.next_event_tracing(scene, &mut s, |w, stretch, _| {
             if let Keep::Beams(scale) = keep
                 && w.depth > 0
             {
                 beams.push(BeamSegment {
                     origin: w.ray.o,
                     direction: w.ray.d,
-                    length,
+                    length: stretch.flight,
                     power: w.beta * scale,
-                    medium,
+                    medium: stretch.medium,
                 });
             }
         });
