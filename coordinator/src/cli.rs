@@ -241,7 +241,7 @@ pub struct JobArgs {
     #[arg(long)]
     pub iterations: Option<u64>,
     /// SPPM: photons emitted per iteration [default: the scene's photon_count, else a quarter
-    /// of the pixels, at least 4096].
+    /// of the pixels, at least 16384].
     #[arg(long)]
     pub photons: Option<u64>,
     /// SPPM: initial gather radius in scene units [default: the scene's initial_radius, else
