@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Equal-time race against Mitsuba 3: renders each scene with our path tracer and SPPM and with
-Mitsuba 3's path integrator (and, on the caustic scene, its particle tracer too) for the same wall
-time, back to back, and prints each one's RMSE against the scene's Mitsuba reference, the samples
-(or iterations) reached, and the ratios. Mitsuba's column is its best method on the scene.
+Mitsuba 3's path integrator (and, on the caustic scene, both renderers' particle tracers too) for
+the same wall time, back to back, and prints each one's RMSE against the scene's Mitsuba
+reference, the samples (or iterations) reached, and the ratios. Mitsuba's column is its best
+method on the scene; the ratio is our best method's.
 
 Mitsuba comes from PyPI into a local virtual environment that this script makes if it is missing
 (never in CI):
@@ -148,13 +149,17 @@ def main():
             continue
         path = ours(args.coordinator, scene, ref, defines, "path", args.seconds, py)
         sppm = ours(args.coordinator, scene, ref, defines, "sppm", args.seconds, py)
+        # Where Mitsuba races its particle tracer, ours races too.
+        extra = [ours(args.coordinator, scene, ref, defines, "ptracer", args.seconds, py)] if "ptracer" in methods else []
         runs = [mitsuba(py, scene, ref, defines, args.seconds, m) for m in methods]
         mi_r = min(runs, key=lambda r: r.get("rmse", float("inf")))
         mi_path = next((r for r, m in zip(runs, methods) if m in (None, "path")), mi_r)
-        best = min((r["rmse"] for r in (path, sppm) if "error" not in r), default=float("nan"))
+        best = min((r["rmse"] for r in [path, sppm] + extra if "error" not in r), default=float("nan"))
         ratio = best / mi_r["rmse"] if "error" not in mi_r else float("nan")
         spp_ratio = (path["spp"] / mi_path["spp"]) if "error" not in path and "error" not in mi_path and path["spp"] else float("nan")
         print(f"| {name} | {cell(path)} | {cell(sppm)} | {cell(mi_r)} | {ratio:.2f} | {spp_ratio:.2f} |", flush=True)
+        for r in extra:
+            print(f"|   (ours, ptracer: {cell(r)}) | | | | | |", flush=True)
         for r, m in zip(runs, methods):
             if r is not mi_r:
                 print(f"|   (Mitsuba's {m}: {cell(r)}) | | | | | |", flush=True)

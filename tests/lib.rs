@@ -230,14 +230,28 @@ pub fn check_path_against_mitsuba(scene: &str, exr: &str, res: &str, spp: u64, m
 pub fn check_sppm_convergence(name: &str) {
     let scene = load(&refs_dir().join(format!("{name}.xml")), &[]);
     let settings = sppm_settings(&scene, 100_000);
-    let reference = reference(&format!("{name}.exr"));
-    let few = compare(&render_sppm(&scene, settings, 8, 1).image().unwrap(), &reference);
-    let many_film = render_sppm(&scene, settings, 64, 1);
+    check_convergence(&format!("{name}, SPPM"), name, (8, 64), 0.02, |n| {
+        render_sppm(&scene, settings, n, 1)
+    });
+}
+
+/// `render(n)` renders n passes; against `refs/REFERENCE.exr`, at `many` passes every channel
+/// mean must be within `max_mean_error` and the MSE under half that at `few`.
+pub fn check_convergence(
+    label: &str,
+    reference_name: &str,
+    (few, many): (u64, u64),
+    max_mean_error: f64,
+    render: impl Fn(u64) -> FilmSum,
+) {
+    let reference = reference(&format!("{reference_name}.exr"));
+    let a = compare(&render(few).image().unwrap(), &reference);
+    let many_film = render(many);
     assert_eq!(many_film.nonfinite, 0);
-    let many = compare(&many_film.image().unwrap(), &reference);
-    for (n, c) in [(8, &few), (64, &many)] {
+    let b = compare(&many_film.image().unwrap(), &reference);
+    for (n, c) in [(few, &a), (many, &b)] {
         eprintln!(
-            "{name}, SPPM {n} iterations: rmse {:.4}, means {:?} vs {:?}, worst mean error {:.3}%",
+            "{label} {n} passes: rmse {:.4}, means {:?} vs {:?}, worst mean error {:.3}%",
             c.mse.sqrt(),
             c.mean,
             c.reference_mean,
@@ -245,13 +259,14 @@ pub fn check_sppm_convergence(name: &str) {
         );
     }
     assert!(
-        many.worst_mean_error() < 0.02,
-        "{name}: a channel mean is off by more than 2%: {many:?}"
+        b.worst_mean_error() < max_mean_error,
+        "{label}: a channel mean is off by more than {:.1}%: {b:?}",
+        100.0 * max_mean_error
     );
     assert!(
-        many.mse < 0.5 * few.mse,
-        "{name}: MSE {:.3e} at 64 iterations vs {:.3e} at 8",
-        many.mse,
-        few.mse
+        b.mse < 0.5 * a.mse,
+        "{label}: MSE {:.3e} at {many} passes vs {:.3e} at {few}",
+        b.mse,
+        a.mse
     );
 }

@@ -54,4 +54,58 @@ impl Camera {
         let dir = self.to_world.transform_vector3a(d_local).normalize();
         Ray::new(o, dir)
     }
+
+    /// Connects world point `p` to the camera through lens position `u_lens` (ignored by a
+    /// pinhole), for particle tracing: where on the film (continuous pixel coordinates, x right
+    /// and y down from the top-left corner) the ray from the lens point through `p` lands, the
+    /// lens point, and the camera's share of the contribution, 1 / (A cos³θ r²): its importance
+    /// 1 / (A cos⁴θ) (A the film's area at unit distance, so that the whole film integrates to
+    /// one) times cos θ / r², over the lens point's density (which cancels the thin lens's
+    /// importance over its area). A pass of one light path per pixel then adds, per pixel, what
+    /// the pixel's mean is made of. None if `p` is behind the camera, nearer than the near clip
+    /// or off the film.
+    pub fn connect(&self, p: Vec3A, u_lens: Vec2) -> Option<CameraConnection> {
+        let local = self.to_world.inverse().transform_point3a(p);
+        let lens = if self.aperture_radius > 0.0 {
+            let l = square_to_uniform_disk_concentric(u_lens) * self.aperture_radius;
+            Vec3A::new(l.x, l.y, 0.0)
+        } else {
+            Vec3A::ZERO
+        };
+        let v = local - lens;
+        let r = v.length();
+        if v.z.is_nan() || v.z <= 0.0 || r <= self.near_clip {
+            return None;
+        }
+        // The direction through the film plane at unit distance: for a thin lens, where the ray
+        // from the lens point through `p` crosses the plane in focus, over its distance.
+        let d = if self.aperture_radius > 0.0 {
+            (lens + v * (self.focus_distance / v.z)) / self.focus_distance
+        } else {
+            v / v.z
+        };
+        let sx = (1.0 - d.x / self.tan_half_x) / 2.0;
+        let sy = (1.0 - d.y / self.tan_half_y) / 2.0;
+        if !((0.0..1.0).contains(&sx) && (0.0..1.0).contains(&sy)) {
+            return None;
+        }
+        let cos = v.z / r;
+        let area = 4.0 * self.tan_half_x * self.tan_half_y;
+        Some(CameraConnection {
+            film: Vec2::new(sx * self.width as f32, sy * self.height as f32),
+            lens: self.to_world.transform_point3a(lens),
+            weight: 1.0 / (area * cos * cos * cos * r * r),
+        })
+    }
+}
+
+/// A world point connected to the camera ([`Camera::connect`]).
+#[derive(Clone, Copy, Debug)]
+pub struct CameraConnection {
+    /// Where on the film, in pixels from the top-left corner.
+    pub film: Vec2,
+    /// The lens point, in world space.
+    pub lens: Vec3A,
+    /// The camera's share of the contribution, 1 / (A cos³θ r²).
+    pub weight: f32,
 }

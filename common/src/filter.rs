@@ -53,8 +53,10 @@ impl Filter {
     /// The filter's value at offset `x` (pixels) from a pixel's centre.
     pub fn eval(&self, x: f32) -> f32 {
         match *self {
+            // Closed, as Mitsuba's: a sample on a pixel's edge (offset 0 within its pixel, at
+            // distance 0.5 from the centre) still counts for its own pixel.
             Filter::Box => {
-                if (-0.5..0.5).contains(&x) {
+                if x.abs() <= 0.5 {
                     1.0
                 } else {
                     0.0

@@ -22,15 +22,18 @@ pub enum Integrator {
     Direct,
     /// Progressive photon mapping.
     Sppm,
+    /// Mitsuba's particle tracer.
+    Ptracer,
 }
 
 impl Integrator {
     /// The method that renders a scene's `<integrator>` (already reduced by the scene loader
-    /// to `path`, `direct` or `sppm`).
+    /// to `path`, `direct`, `sppm` or `ptracer`).
     pub fn of_scene(scene: &Scene) -> Integrator {
         match scene.integrator.kind.as_str() {
             "direct" => Integrator::Direct,
             "sppm" => Integrator::Sppm,
+            "ptracer" => Integrator::Ptracer,
             _ => Integrator::Path,
         }
     }
@@ -159,7 +162,7 @@ impl JobSettings {
         let mut warnings = Vec::new();
         let integrator = self.integrator.unwrap_or_else(|| Integrator::of_scene(scene));
         let (method, declared) = match integrator {
-            Integrator::Path | Integrator::Direct => {
+            Integrator::Path | Integrator::Direct | Integrator::Ptracer => {
                 for (name, given) in [
                     ("photons", self.photons.is_some()),
                     ("radius", self.radius.is_some()),
@@ -172,10 +175,10 @@ impl JobSettings {
                         return Err(JobError::NotForPath(name));
                     }
                 }
-                let method = if integrator == Integrator::Path {
-                    Method::Path(PathSettings::from_scene(scene))
-                } else {
-                    Method::Direct(DirectSettings::from_scene(scene))
+                let method = match integrator {
+                    Integrator::Path => Method::Path(PathSettings::from_scene(scene)),
+                    Integrator::Direct => Method::Direct(DirectSettings::from_scene(scene)),
+                    _ => Method::Ptracer(PathSettings::from_scene(scene)),
                 };
                 (method, None)
             }

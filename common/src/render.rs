@@ -14,6 +14,7 @@ use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
 use crate::integrator::direct_illumination::{self, DirectSettings};
 use crate::integrator::path::{self, PathSettings};
+use crate::integrator::ptracer;
 use crate::integrator::sppm::{
     self, BeamMap, GatherContext, PhotonBeamMap, PhotonBuffers, PhotonMap, SppmSettings, VolumeEstimate,
     VolumeMap,
@@ -34,6 +35,21 @@ pub enum Method {
     /// Progressive photon mapping: a pass is one iteration (a photon pass and one camera path
     /// per pixel).
     Sppm(SppmSettings),
+    /// Mitsuba's particle tracer: a pass is one light path per pixel, connected to the camera
+    /// at every bounce, and one camera ray per pixel for emitters seen directly.
+    Ptracer(PathSettings),
+}
+
+impl Method {
+    /// The method's name, as `--integrator` and the job API spell it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::Path(_) => "path",
+            Method::Direct(_) => "direct",
+            Method::Sppm(_) => "sppm",
+            Method::Ptracer(_) => "ptracer",
+        }
+    }
 }
 
 /// How to render.
@@ -59,6 +75,7 @@ pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64
             let radii = s.radii(passes.clone());
             render_sppm_iterations(scene, settings.seed, s, passes, &radii)
         }
+        Method::Ptracer(p) => ptracer_passes(scene, p, settings.seed, passes),
     }
 }
 
@@ -71,7 +88,7 @@ pub fn render_batch(
     radii: &[[f32; 2]],
 ) -> FilmSum {
     match &settings.method {
-        Method::Path(_) | Method::Direct(_) => render_passes(scene, settings, passes),
+        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) => render_passes(scene, settings, passes),
         Method::Sppm(s) => render_sppm_iterations(scene, settings.seed, s, passes, radii),
     }
 }
@@ -169,14 +186,8 @@ fn add_pixel_samples(
     pass: u64,
     radiance: impl Fn(Ray, &mut Sampler) -> Rgb + Sync,
 ) {
-    let w = scene.width();
     let sample = |x: u32, y: u32| -> (Rgb, Vec2) {
-        let pixel = y as u64 * w as u64 + x as u64;
-        // Even and odd passes are two independent sequences (of `pass / 2`), so the noise
-        // estimate's halves stay independent (`parity.rs`).
-        let mut sampler = Sampler::sobol(seed, Stream::Camera, 2 * pixel + pass % 2, pass / 2);
-        let u_pixel = sampler.next_2d();
-        let ray = scene.camera.generate_ray(x, y, u_pixel, sampler.next_2d());
+        let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
         (radiance(ray, &mut sampler), u_pixel)
     };
     if scene.filter.is_box() {
@@ -185,6 +196,59 @@ fn add_pixel_samples(
         splat::add_filtered_samples(scene, film, sample);
     }
     film.passes += 1;
+}
+
+/// The camera ray of pixel (x, y) in pass `pass`, its offset within the pixel, and the sampler
+/// that goes on along it.
+fn camera_sample(scene: &Scene, seed: u64, pass: u64, x: u32, y: u32) -> (Ray, Vec2, Sampler) {
+    let pixel = y as u64 * scene.width() as u64 + x as u64;
+    // Even and odd passes are two independent sequences (of `pass / 2`), so the noise
+    // estimate's halves stay independent (`parity.rs`).
+    let mut sampler = Sampler::sobol(seed, Stream::Camera, 2 * pixel + pass % 2, pass / 2);
+    let u_pixel = sampler.next_2d();
+    let ray = scene.camera.generate_ray(x, y, u_pixel, sampler.next_2d());
+    (ray, u_pixel, sampler)
+}
+
+/// Light paths (and camera rays) per parallel task of a particle tracer's pass.
+const PTRACER_CHUNK: u64 = 1024;
+
+/// Renders `passes` of the particle tracer. Pixel i's camera ray finds emitters seen directly
+/// (the path tracer stopped at depth 1) and light path i the rest; every contribution is
+/// splatted on its own ([`splat::Splats`]), so the sums do not depend on the threads.
+fn ptracer_passes(scene: &Scene, settings: &PathSettings, seed: u64, passes: Range<u64>) -> FilmSum {
+    let mut film = FilmSum::new(scene.width(), scene.height());
+    let seen = PathSettings {
+        max_depth: Some(1),
+        rr_depth: settings.rr_depth,
+    };
+    let (w, pixels) = (scene.width() as u64, scene.width() as u64 * scene.height() as u64);
+    for pass in passes {
+        let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(PTRACER_CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut out = splat::Splats::new();
+                for i in c * PTRACER_CHUNK..((c + 1) * PTRACER_CHUNK).min(pixels) {
+                    let (x, y) = ((i % w) as u32, (i / w) as u32);
+                    let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
+                    let at = Vec2::new(x as f32, y as f32) + u_pixel;
+                    out.add(scene, at, path::radiance(scene, &seen, ray, &mut sampler));
+                    ptracer::trace_light_path(scene, settings, seed, pass, i, &mut |at, l| {
+                        out.add(scene, at, l)
+                    });
+                }
+                out
+            })
+            .collect();
+        for c in chunks {
+            film.nonfinite += c.nonfinite;
+            for (p, v) in &c.values {
+                add_fixed(&mut film.sums[*p as usize], v);
+            }
+        }
+        film.passes += 1;
+    }
+    film
 }
 
 /// Box filter: one sample per pixel, computed in parallel by rows.
@@ -275,5 +339,54 @@ mod tests {
             let img = whole.image().unwrap();
             assert!(img.iter().all(|p| p.is_finite()) && img.iter().any(|p| p.z > 0.0));
         }
+    }
+
+    /// A particle tracer's contribution lands whole, whatever the filter and wherever it
+    /// lands (the corner included, where most of a wide filter's pixels are off the image).
+    #[test]
+    fn splats_keep_each_contribution_whole() {
+        for filter in [
+            "<rfilter type=\"box\"/>",
+            "<rfilter type=\"gaussian\"/>",
+            "<rfilter type=\"tent\"><float name=\"radius\" value=\"1.5\"/></rfilter>",
+        ] {
+            let text = SCENE.replace("<rfilter type=\"box\"/>", filter);
+            let scene = Scene::from_str(&text, Path::new("inline.xml"), &[]).unwrap();
+            let l = Rgb::new(0.25, 1.0, 3.0);
+            for at in [Vec2::new(0.1, 0.2), Vec2::new(6.5, 4.0), Vec2::new(11.9, 7.99)] {
+                let mut splats = splat::Splats::new();
+                splats.add(&scene, at, l);
+                let mut total = [0i64; 3];
+                for (p, v) in &splats.values {
+                    assert!((*p as usize) < 12 * 8);
+                    add_fixed(&mut total, v);
+                }
+                let whole = to_fixed(l).unwrap();
+                for c in 0..3 {
+                    assert!(
+                        (total[c] - whole[c]).abs() <= splats.values.len() as i64,
+                        "{filter} at {at}: {total:?} vs {whole:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The particle tracer keeps the farm's contract with a splatting filter too.
+    #[test]
+    fn ptracer_passes_sum_to_the_same_bytes_with_any_split_and_threads() {
+        let text = SCENE.replace("<rfilter type=\"box\"/>", "<rfilter type=\"gaussian\"/>");
+        let scene = Scene::from_str(&text, Path::new("inline.xml"), &[]).unwrap();
+        let settings = RenderSettings {
+            seed: 4,
+            method: Method::Ptracer(PathSettings::from_scene(&scene)),
+        };
+        let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+        let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));
+        let mut parts = pool(2).install(|| render_passes(&scene, &settings, 2..5));
+        parts.add(&render_passes(&scene, &settings, 0..2)).unwrap();
+        assert_eq!(whole, parts);
+        assert!(whole.weights.is_empty());
+        assert!(whole.image().unwrap().iter().any(|p| p.z > 0.0));
     }
 }

@@ -199,6 +199,10 @@ pub enum Integrator {
     /// Stochastic progressive photon mapping (Knaus and Zwicker): caustics and light seen
     /// through glass or in mirrors.
     Sppm,
+    /// Mitsuba's particle tracer: light paths connected to the camera at every diffuse
+    /// bounce; caustics on what the camera sees directly, nothing seen through glass or in
+    /// mirrors.
+    Ptracer,
 }
 
 /// SPPM's volume estimator.
@@ -229,7 +233,7 @@ pub struct JobArgs {
     /// The Mitsuba 3 XML scene file.
     pub scene: PathBuf,
     /// Rendering method [default: the scene's <integrator>: path and volpath render with
-    /// path, direct with direct, sppm and ptracer with sppm; path if it has none].
+    /// path, direct with direct, sppm with sppm, ptracer with ptracer; path if it has none].
     #[arg(long, value_enum)]
     pub integrator: Option<Integrator>,
     /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count
@@ -286,12 +290,13 @@ impl JobArgs {
             Integrator::Path => JobIntegrator::Path,
             Integrator::Direct => JobIntegrator::Direct,
             Integrator::Sppm => JobIntegrator::Sppm,
+            Integrator::Ptracer => JobIntegrator::Ptracer,
         });
         let passes = match (integrator, self.spp, self.iterations) {
             (_, Some(_), Some(_)) => {
-                anyhow::bail!("give --spp (path, direct) or --iterations (sppm), not both")
+                anyhow::bail!("give --spp (path, direct, ptracer) or --iterations (sppm), not both")
             }
-            (Some(JobIntegrator::Path | JobIntegrator::Direct), _, Some(_)) => {
+            (Some(JobIntegrator::Path | JobIntegrator::Direct | JobIntegrator::Ptracer), _, Some(_)) => {
                 anyhow::bail!("--iterations applies to --integrator sppm; use --spp")
             }
             (Some(JobIntegrator::Sppm), Some(_), _) => {
@@ -300,7 +305,10 @@ impl JobArgs {
             // Without --integrator the scene decides the method; either flag counts passes.
             (_, spp, it) => spp.or(it),
         };
-        if matches!(integrator, Some(JobIntegrator::Path | JobIntegrator::Direct)) {
+        if matches!(
+            integrator,
+            Some(JobIntegrator::Path | JobIntegrator::Direct | JobIntegrator::Ptracer)
+        ) {
             for (flag, given) in [
                 ("--photons", self.photons.is_some()),
                 ("--radius", self.radius.is_some()),

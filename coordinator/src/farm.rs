@@ -645,11 +645,7 @@ impl Farm {
             workers_present: self.scheduler.workers_present(),
             elapsed_seconds: elapsed,
             rate,
-            integrator: match job.render.method {
-                Method::Path(_) => "path",
-                Method::Direct(_) => "direct",
-                Method::Sppm(_) => "sppm",
-            },
+            integrator: job.render.method.name(),
             width: job.width,
             height: job.height,
             message,

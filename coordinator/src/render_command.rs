@@ -47,11 +47,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     for w in &resolved.warnings {
         eprintln!("warning: {w}");
     }
-    let method = match &resolved.render.method {
-        Method::Path(_) => "path",
-        Method::Direct(_) => "direct",
-        Method::Sppm(_) => "sppm",
-    };
+    let method = resolved.render.method.name();
     let source = if args.job.integrator.is_none() {
         " (the scene's <integrator>)"
     } else {
@@ -59,7 +55,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     eprintln!("method: {method}{source}");
     let (unit, radii_schedule) = match &resolved.render.method {
-        Method::Path(_) | Method::Direct(_) => ("passes", None),
+        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) => ("passes", None),
         Method::Sppm(s) => {
             eprintln!(
                 "SPPM: {} photons per iteration, initial radius {:.4e} (volume {:.4e}), alpha {:.3}, k {}",

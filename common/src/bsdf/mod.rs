@@ -160,8 +160,9 @@ impl Bsdf {
         self.eval_mode(uv, wi, wo, TransportMode::Radiance)
     }
 
-    /// [`Bsdf::eval`] for either transport mode.
-    fn eval_mode(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
+    /// [`Bsdf::eval`] for either transport mode (a particle tracer's connections to the camera
+    /// are importance transport).
+    pub fn eval_mode(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),

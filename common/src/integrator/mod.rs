@@ -4,6 +4,7 @@
 pub mod direct;
 pub mod direct_illumination;
 pub mod path;
+pub mod ptracer;
 pub mod sppm;
 pub mod walk;
 

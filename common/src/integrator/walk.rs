@@ -13,7 +13,7 @@ use glam::Vec3A;
 use super::direct::PreviousBounce;
 use crate::bsdf::{Bsdf, BsdfSample, TransportMode};
 use crate::color::Rgb;
-use crate::geometry::{Frame, Ray, SurfacePoint};
+use crate::geometry::{Frame, Ray, SurfacePoint, offset_ray_origin};
 use crate::medium::Flight;
 use crate::sampling::Sampler;
 use crate::scene::{Scene, ShapeInfo};
@@ -282,6 +282,50 @@ impl Walk {
             self.beta /= q;
         }
         self.beta != Rgb::ZERO
+    }
+}
+
+impl Walk {
+    /// A light path leaving a light picked by power (five random numbers: the light, the
+    /// position, the direction), carrying its power over the pick's probability, in units of
+    /// `unit` (SPPM's total power, so stored photons are of order one; 1 for absolute power).
+    pub fn from_light(scene: &Scene, sampler: &mut Sampler, unit: f32) -> Option<Walk> {
+        let (light, pmf, _) = scene.light_selection.sample(sampler.next_1d());
+        let u_pos = sampler.next_2d();
+        let u_dir = sampler.next_2d();
+        let e = scene.lights[light].sample_emission(scene.bvh.primitives(), u_pos, u_dir)?;
+        let origin = if e.n == Vec3A::ZERO {
+            e.origin
+        } else {
+            offset_ray_origin(e.origin, e.origin_err, e.n, e.dir)
+        };
+        let beta = e.power / (pmf * unit);
+        Some(Walk::new(Ray::new(origin, e.dir), beta, scene.light_media[light]))
+    }
+
+    /// Bounces a light path (a photon) off `hit`: a BSDF sample in importance transport, then
+    /// the photons' roulette on its weight. False when the path ends.
+    pub fn bounce_light(&mut self, hit: &Hit, sampler: &mut Sampler) -> bool {
+        let Some(mut bs) = Walk::sample_bsdf(hit, sampler, TransportMode::Importance) else {
+            return false;
+        };
+        let Some(weight) = photon_roulette(bs.weight, sampler) else {
+            return false;
+        };
+        bs.weight = weight;
+        self.follow(hit, &bs);
+        true
+    }
+
+    /// Scatters a light path in medium `m` at `p`: the photons' roulette on the medium's
+    /// albedo, then the phase function. False when the path ends.
+    pub fn scatter_light(&mut self, scene: &Scene, p: Vec3A, m: u32, sampler: &mut Sampler) -> bool {
+        let Some(weight) = photon_roulette(scene.media[m as usize].albedo, sampler) else {
+            return false;
+        };
+        self.beta *= weight;
+        self.scatter_in_medium(scene, p, m, sampler);
+        true
     }
 }
 

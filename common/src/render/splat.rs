@@ -103,3 +103,65 @@ fn splat_band(scene: &Scene, y0: u32, y1: u32, sample: &impl Fn(u32, u32) -> (Rg
     }
     buf
 }
+
+/// Contributions that land anywhere on the film (a particle tracer's), each spread over the
+/// pixels the filter reaches with its weights normalised to one over those inside the image:
+/// the film cannot weight pixels by the samples they received, as it does for one sample per
+/// pixel, so each contribution keeps its own total. Kept as (pixel, fixed-point value) pairs,
+/// added into the film in any order with the same result.
+pub(super) struct Splats {
+    pub(super) values: Vec<(u32, [i64; 3])>,
+    pub(super) nonfinite: u64,
+    wx: Vec<f32>,
+    wy: Vec<f32>,
+}
+
+impl Splats {
+    pub(super) fn new() -> Splats {
+        Splats {
+            values: Vec::new(),
+            nonfinite: 0,
+            wx: Vec::new(),
+            wy: Vec::new(),
+        }
+    }
+
+    /// Adds `l` at film position `at` (pixels from the top-left corner).
+    pub(super) fn add(&mut self, scene: &Scene, at: Vec2, l: Rgb) {
+        if !l.is_finite() {
+            self.nonfinite += 1;
+            return;
+        }
+        if l == Rgb::ZERO {
+            return;
+        }
+        let (w, h) = (scene.width() as i64, scene.height() as i64);
+        let n = scene.filter.reach() as i64;
+        let (x, y) = (at.x.floor() as i64, at.y.floor() as i64);
+        scene.filter.weights(at.x - x as f32, &mut self.wx);
+        scene.filter.weights(at.y - y as f32, &mut self.wy);
+        let inside = |d: usize, c: i64, len: i64| (0..len).contains(&(c + d as i64 - n));
+        let sum_inside = |ws: &[f32], c: i64, len: i64| -> f32 {
+            ws.iter()
+                .enumerate()
+                .filter(|(d, _)| inside(*d, c, len))
+                .map(|(_, f)| f)
+                .sum()
+        };
+        let total = sum_inside(&self.wx, x, w) * sum_inside(&self.wy, y, h);
+        if total <= 0.0 {
+            return;
+        }
+        for (dy, fy) in self.wy.iter().enumerate() {
+            for (dx, fx) in self.wx.iter().enumerate() {
+                let f = fx * fy;
+                if f == 0.0 || !inside(dx, x, w) || !inside(dy, y, h) {
+                    continue;
+                }
+                let p = (y + dy as i64 - n) * w + x + dx as i64 - n;
+                let v = to_fixed(l * (f / total)).expect("finite sample, finite weight");
+                self.values.push((p as u32, v));
+            }
+        }
+    }
+}

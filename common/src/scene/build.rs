@@ -319,8 +319,8 @@ impl<'a> Builder<'a> {
     }
 
     /// `<integrator>`, reduced to the method of ours that renders it: `path` (Mitsuba's `path`,
-    /// `volpath`, `volpathmis`), `direct`, or `sppm` (ours, and Mitsuba's `ptracer` with a
-    /// warning). The wrappers `moment` and `aov` render their first nested integrator.
+    /// `volpath`, `volpathmis`), `direct`, `ptracer` or `sppm` (ours). The wrappers `moment` and
+    /// `aov` render their first nested integrator.
     fn integrator(&mut self, el: &Element) -> Res<IntegratorDecl> {
         let p = Props::new(self.ctx, el)?;
         let kind = p.kind()?;
@@ -345,19 +345,7 @@ impl<'a> Builder<'a> {
         }
         let method = match kind {
             "path" | "volpath" | "volpathmis" => "path",
-            // Scenes ask for the particle tracer for what it alone of Mitsuba's integrators
-            // reaches: caustics of small and delta lights seen on diffuse surfaces, which a path
-            // tracer misses (tests/refs/caustic.xml: a mean of 0.027 against 0.132). SPPM also
-            // follows light from the lights and renders them.
-            "ptracer" => {
-                self.warnings.push(format!(
-                    "{}:{}: <integrator type=\"ptracer\">: rendered with our SPPM, which renders the caustics a \
-                     particle tracer does (a particle tracer is not implemented)",
-                    el.file.display(),
-                    el.line
-                ));
-                "sppm"
-            }
+            "ptracer" => "ptracer",
             "direct" => "direct",
             "sppm" => "sppm",
             other => {

@@ -7,9 +7,7 @@ use rayon::prelude::*;
 
 use super::photon::Photon;
 use super::photon_beams::BeamSegment;
-use crate::bsdf::TransportMode;
-use crate::geometry::{Ray, offset_ray_origin};
-use crate::integrator::walk::{Event, Walk, photon_roulette};
+use crate::integrator::walk::{Event, Walk};
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -115,20 +113,9 @@ fn trace_one(
     out: &mut PhotonBuffers,
 ) {
     let mut s = Sampler::sobol(seed, Stream::Photon, iteration, index);
-    let (light, pmf, _) = scene.light_selection.sample(s.next_1d());
-    let u_pos = s.next_2d();
-    let u_dir = s.next_2d();
-    let Some(e) = scene.lights[light].sample_emission(scene.bvh.primitives(), u_pos, u_dir) else {
+    let Some(mut walk) = Walk::from_light(scene, &mut s, scene.light_selection.total()) else {
         return;
     };
-    // In units of the total power: beta = power / (pmf · total).
-    let beta = e.power / (pmf * scene.light_selection.total());
-    let origin = if e.n == glam::Vec3A::ZERO {
-        e.origin
-    } else {
-        offset_ray_origin(e.origin, e.origin_err, e.n, e.dir)
-    };
-    let mut walk = Walk::new(Ray::new(origin, e.dir), beta, scene.light_media[light]);
     let beams = &mut out.beams;
     while walk.depth < max_depth {
         // As on surfaces, the first flight and collision are direct light, sampled by the
@@ -153,11 +140,9 @@ fn trace_one(
                 if walk.depth > 0 && keep == Keep::Points {
                     out.volume.push(Photon::new(p, -walk.ray.d, walk.beta));
                 }
-                let Some(weight) = photon_roulette(scene.media[medium as usize].albedo, &mut s) else {
+                if !walk.scatter_light(scene, p, medium, &mut s) {
                     return;
-                };
-                walk.beta *= weight;
-                walk.scatter_in_medium(scene, p, medium, &mut s);
+                }
             }
             Event::Surface(hit) => {
                 // The first hit is direct light, which the camera pass samples explicitly;
@@ -165,14 +150,9 @@ fn trace_one(
                 if walk.depth > 0 && hit.bsdf.gathers_photons() {
                     out.surface.push(Photon::new(hit.sp.p, hit.wo, walk.beta));
                 }
-                let Some(mut bs) = Walk::sample_bsdf(&hit, &mut s, TransportMode::Importance) else {
+                if !walk.bounce_light(&hit, &mut s) {
                     return;
-                };
-                let Some(weight) = photon_roulette(bs.weight, &mut s) else {
-                    return;
-                };
-                bs.weight = weight;
-                walk.follow(&hit, &bs);
+                }
             }
         }
     }
