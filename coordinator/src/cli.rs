@@ -153,8 +153,8 @@ pub struct ConvergeArgs {
     /// Reference image (EXR) of the same resolution.
     #[arg(long)]
     pub reference: PathBuf,
-    /// Methods to compare, comma-separated: path, sppm (its default volume estimate), sppm-beam,
-    /// sppm-point, sppm-photon-beams (SPPM with that volume estimate).
+    /// Methods to compare, comma-separated: path, ptracer, sppm (its default volume estimate),
+    /// sppm-beam, sppm-point, sppm-photon-beams (SPPM with that volume estimate).
     #[arg(long, default_value = "path,sppm")]
     pub methods: String,
     /// Render time per line, seconds.

@@ -132,11 +132,15 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
     let mut lines = Vec::new();
     for m in args.methods.split(',').map(str::trim) {
         match m {
-            // SPPM's settings do not apply to the path tracer's line.
-            "path" => lines.push((
-                "path".to_string(),
+            // SPPM's settings do not apply to the path tracer's or the particle tracer's line.
+            "path" | "ptracer" => lines.push((
+                m.to_string(),
                 JobSettings {
-                    integrator: Some(JobIntegrator::Path),
+                    integrator: Some(if m == "path" {
+                        JobIntegrator::Path
+                    } else {
+                        JobIntegrator::Ptracer
+                    }),
                     photons: None,
                     k: None,
                     volume_radius_ratio: None,
@@ -182,7 +186,9 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                     }
                 }
             }
-            other => bail!("unknown method \"{other}\" in --methods (path, sppm, sppm-beam, sppm-point)"),
+            other => bail!(
+                "unknown method \"{other}\" in --methods (path, ptracer, sppm, sppm-beam, sppm-point, sppm-photon-beams)"
+            ),
         }
     }
     Ok(lines)

@@ -35,7 +35,7 @@ const JOB: &[&str] = &[
     "filter=gaussian",
 ];
 
-fn local_render(dir: &Path) -> Vec<u8> {
+fn local_render(dir: &Path, job: &[&str]) -> Vec<u8> {
     let out = dir.join("local.exr");
     let o = Command::new(coordinator_bin())
         .args([
@@ -44,17 +44,17 @@ fn local_render(dir: &Path) -> Vec<u8> {
             "--out",
             out.to_str().unwrap(),
         ])
-        .args(JOB)
+        .args(job)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     std::fs::read(out).unwrap()
 }
 
-fn submit(url: &str) -> u64 {
+fn submit(url: &str, job: &[&str]) -> u64 {
     let o = Command::new(coordinator_bin())
         .args(["submit", "--to", url, scene().to_str().unwrap()])
-        .args(JOB)
+        .args(job)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -114,12 +114,46 @@ fn two_workers_give_the_bytes_of_a_local_render() {
     );
     let _w1 = worker(&url, "w1", dir.path());
     let _w2 = worker(&url, "w2", dir.path());
-    let id = submit(&url);
+    let id = submit(&url, JOB);
     let s = wait_done(&url, id);
     assert_eq!(s["iterations_done"], 40);
     assert_eq!(s["checkpoint_iterations"], 40);
     assert!(
-        image(&url, id) == local_render(dir.path()),
+        image(&url, id) == local_render(dir.path(), JOB),
+        "farm and local bytes differ"
+    );
+}
+
+/// A particle tracer's job: its light paths land anywhere on the film, and the farm's sums
+/// must still merge to the local bytes.
+#[test]
+fn a_particle_tracer_job_gives_the_bytes_of_a_local_render() {
+    const PTRACER: &[&str] = &[
+        "--integrator",
+        "ptracer",
+        "--spp",
+        "24",
+        "--seed",
+        "5",
+        "-D",
+        "res=48",
+        "-D",
+        "filter=gaussian",
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "0.05"],
+    );
+    let _w1 = worker(&url, "w1", dir.path());
+    let _w2 = worker(&url, "w2", dir.path());
+    let id = submit(&url, PTRACER);
+    let s = wait_done(&url, id);
+    assert_eq!(s["integrator"], "ptracer");
+    assert_eq!(s["iterations_done"], 24);
+    assert!(
+        image(&url, id) == local_render(dir.path(), PTRACER),
         "farm and local bytes differ"
     );
 }
@@ -133,7 +167,7 @@ fn a_worker_killed_mid_batch_loses_nothing() {
         &["--batch-seconds", "2", "--lease-timeout", "1"],
     );
     let mut victim = worker(&url, "victim", dir.path());
-    let id = submit(&url);
+    let id = submit(&url, JOB);
     // Its first batch is one pass (to measure it); kill it inside a later, larger one.
     wait_until(
         "the victim to hold a second batch",
@@ -152,7 +186,7 @@ fn a_worker_killed_mid_batch_loses_nothing() {
     let s = wait_done(&url, id);
     assert_eq!(s["iterations_done"], 40, "exactly the requested iterations: {s}");
     assert!(
-        image(&url, id) == local_render(dir.path()),
+        image(&url, id) == local_render(dir.path(), JOB),
         "bytes differ after a worker was killed"
     );
 }
@@ -166,7 +200,7 @@ fn a_restarted_coordinator_resumes_the_job() {
     let flags = ["--batch-seconds", "0.3", "--lease-timeout", "2"];
     let (mut coordinator, url) = serve(&data, &bind, &flags);
     let _w = worker(&url, "w", dir.path());
-    let id = submit(&url);
+    let id = submit(&url, JOB);
     wait_until("some passes to arrive", Duration::from_secs(60), || {
         status(&url, id).is_some_and(|s| s["iterations_done"].as_u64().unwrap_or(0) >= 17)
     });
@@ -197,7 +231,7 @@ fn a_restarted_coordinator_resumes_the_job() {
     let s = wait_done(&url, id);
     assert_eq!(s["iterations_done"], 40, "{s}");
     assert!(
-        image(&url, id) == local_render(dir.path()),
+        image(&url, id) == local_render(dir.path(), JOB),
         "bytes differ after a restart"
     );
 }
@@ -224,7 +258,7 @@ fn a_batch_finished_while_the_coordinator_is_down_is_delivered_after_its_restart
             .spawn()
             .unwrap(),
     );
-    let id = submit(&url);
+    let id = submit(&url, JOB);
     // Its first batch is one pass (to measure it); the second takes about 3 s.
     wait_until(
         "the worker to hold its second batch",
@@ -266,7 +300,7 @@ fn a_batch_finished_while_the_coordinator_is_down_is_delivered_after_its_restart
         "the kept batch was refused: {log}"
     );
     assert!(
-        image(&url, id) == local_render(dir.path()),
+        image(&url, id) == local_render(dir.path(), JOB),
         "bytes differ after a batch was delivered across a restart"
     );
 }
@@ -277,7 +311,7 @@ fn a_worker_stopped_with_sigterm_delivers_its_batch_and_exits() {
     let dir = tempfile::tempdir().unwrap();
     let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &["--batch-seconds", "1"]);
     let mut w = worker(&url, "polite", dir.path());
-    let id = submit(&url);
+    let id = submit(&url, JOB);
     wait_until("the worker to hold a batch", Duration::from_secs(60), || {
         status(&url, id).is_some_and(|s| {
             s["iterations_done"].as_u64().unwrap_or(0) >= 1 && s["workers"] == serde_json::json!(["polite"])
