@@ -313,8 +313,9 @@ mod tests {
         assert!(whole.sums.iter().any(|s| s[2] > 0));
     }
 
-    /// Splatted samples (Gaussian, tent) keep the farm's contract: any split of the passes, in
-    /// any order, on any number of threads, sums to the same bytes.
+    /// Splatted samples (Gaussian, tent), a camera's and a particle tracer's, keep the farm's
+    /// contract: any split of the passes, in any order, on any number of threads, sums to the
+    /// same bytes.
     #[test]
     fn splatted_passes_sum_to_the_same_bytes_with_any_split_and_threads() {
         for filter in [
@@ -324,20 +325,27 @@ mod tests {
             let text = SCENE.replace("<rfilter type=\"box\"/>", filter);
             let scene = Scene::from_str(&text, Path::new("inline.xml"), &[]).unwrap();
             assert!(!scene.filter.is_box());
-            let settings = RenderSettings {
-                seed: 3,
-                method: Method::Path(PathSettings::from_scene(&scene)),
-            };
-            let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
-            let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));
-            let mut parts = pool(2).install(|| render_passes(&scene, &settings, 2..5));
-            parts.add(&render_passes(&scene, &settings, 0..2)).unwrap();
-            assert_eq!(whole, parts);
-            assert_eq!(whole.weights.len(), 12 * 8);
-            // Every pixel received weight; a box-filtered sum added to it stays consistent.
-            assert!(whole.weights.iter().all(|&w| w > 0));
-            let img = whole.image().unwrap();
-            assert!(img.iter().all(|p| p.is_finite()) && img.iter().any(|p| p.z > 0.0));
+            let path = PathSettings::from_scene(&scene);
+            // The particle tracer's contributions land anywhere on the film.
+            for method in [Method::Path(path), Method::Ptracer(path)] {
+                let settings = RenderSettings { seed: 3, method };
+                let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+                let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));
+                let mut parts = pool(2).install(|| render_passes(&scene, &settings, 2..5));
+                parts.add(&render_passes(&scene, &settings, 0..2)).unwrap();
+                assert_eq!(whole, parts);
+                if let Method::Path(_) = method {
+                    // Every pixel received weight; a box-filtered sum added to it stays
+                    // consistent.
+                    assert_eq!(whole.weights.len(), 12 * 8);
+                    assert!(whole.weights.iter().all(|&w| w > 0));
+                } else {
+                    // Each splat keeps its own total: the film divides by the pass count.
+                    assert!(whole.weights.is_empty());
+                }
+                let img = whole.image().unwrap();
+                assert!(img.iter().all(|p| p.is_finite()) && img.iter().any(|p| p.z > 0.0));
+            }
         }
     }
 
@@ -370,23 +378,5 @@ mod tests {
                 }
             }
         }
-    }
-
-    /// The particle tracer keeps the farm's contract with a splatting filter too.
-    #[test]
-    fn ptracer_passes_sum_to_the_same_bytes_with_any_split_and_threads() {
-        let text = SCENE.replace("<rfilter type=\"box\"/>", "<rfilter type=\"gaussian\"/>");
-        let scene = Scene::from_str(&text, Path::new("inline.xml"), &[]).unwrap();
-        let settings = RenderSettings {
-            seed: 4,
-            method: Method::Ptracer(PathSettings::from_scene(&scene)),
-        };
-        let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
-        let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));
-        let mut parts = pool(2).install(|| render_passes(&scene, &settings, 2..5));
-        parts.add(&render_passes(&scene, &settings, 0..2)).unwrap();
-        assert_eq!(whole, parts);
-        assert!(whole.weights.is_empty());
-        assert!(whole.image().unwrap().iter().any(|p| p.z > 0.0));
     }
 }

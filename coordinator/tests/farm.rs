@@ -104,24 +104,29 @@ fn image(url: &str, id: u64) -> Vec<u8> {
     })
 }
 
-#[test]
-fn two_workers_give_the_bytes_of_a_local_render() {
+/// Renders `job` on a coordinator with two workers, batches of `batch_seconds`: the job's final
+/// status, and whether its image has the bytes of `coordinator render` with the same settings.
+fn two_workers_render(job: &[&str], batch_seconds: &str) -> (Value, bool) {
     let dir = tempfile::tempdir().unwrap();
     let (_coordinator, url) = serve(
         &dir.path().join("data"),
         "127.0.0.1:0",
-        &["--batch-seconds", "0.2"],
+        &["--batch-seconds", batch_seconds],
     );
     let _w1 = worker(&url, "w1", dir.path());
     let _w2 = worker(&url, "w2", dir.path());
-    let id = submit(&url, JOB);
+    let id = submit(&url, job);
     let s = wait_done(&url, id);
+    let same = image(&url, id) == local_render(dir.path(), job);
+    (s, same)
+}
+
+#[test]
+fn two_workers_give_the_bytes_of_a_local_render() {
+    let (s, same) = two_workers_render(JOB, "0.2");
     assert_eq!(s["iterations_done"], 40);
     assert_eq!(s["checkpoint_iterations"], 40);
-    assert!(
-        image(&url, id) == local_render(dir.path(), JOB),
-        "farm and local bytes differ"
-    );
+    assert!(same, "farm and local bytes differ");
 }
 
 /// A particle tracer's job: its light paths land anywhere on the film, and the farm's sums
@@ -140,22 +145,10 @@ fn a_particle_tracer_job_gives_the_bytes_of_a_local_render() {
         "-D",
         "filter=gaussian",
     ];
-    let dir = tempfile::tempdir().unwrap();
-    let (_coordinator, url) = serve(
-        &dir.path().join("data"),
-        "127.0.0.1:0",
-        &["--batch-seconds", "0.05"],
-    );
-    let _w1 = worker(&url, "w1", dir.path());
-    let _w2 = worker(&url, "w2", dir.path());
-    let id = submit(&url, PTRACER);
-    let s = wait_done(&url, id);
+    let (s, same) = two_workers_render(PTRACER, "0.05");
     assert_eq!(s["integrator"], "ptracer");
     assert_eq!(s["iterations_done"], 24);
-    assert!(
-        image(&url, id) == local_render(dir.path(), PTRACER),
-        "farm and local bytes differ"
-    );
+    assert!(same, "farm and local bytes differ");
 }
 
 #[test]

@@ -1,5 +1,6 @@
-//! One bounce of a light path, written once for the three transport loops: the path tracer, SPPM's
-//! camera pass and its photon pass.
+//! One bounce of a light path, written once for the transport loops: the path tracer, SPPM's
+//! camera pass and photon pass, and the particle tracer (whose light paths start and bounce as
+//! photons do).
 //!
 //! A [`Walk`] is a path between bounces. [`Walk::next_event`] finds where it interacts next (a
 //! collision in a medium, a surface that scatters, or nothing), crossing medium boundaries on the
@@ -283,9 +284,7 @@ impl Walk {
         }
         self.beta != Rgb::ZERO
     }
-}
 
-impl Walk {
     /// A light path leaving a light picked by power (five random numbers: the light, the
     /// position, the direction), carrying its power over the pick's probability, in units of
     /// `unit` (SPPM's total power, so stored photons are of order one; 1 for absolute power).
