@@ -236,7 +236,8 @@ pub struct JobArgs {
     /// path, direct with direct, sppm with sppm, ptracer with ptracer; path if it has none].
     #[arg(long, value_enum)]
     pub integrator: Option<Integrator>,
-    /// Path tracing: samples per pixel (passes). Default: the scene's sampler sample_count
+    /// Path tracing, direct and ptracer: samples (light paths for ptracer) per pixel (passes).
+    /// Default: the scene's sampler sample_count
     /// (`render`: no limit when --time-limit is given).
     #[arg(long)]
     pub spp: Option<u64>,
