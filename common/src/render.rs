@@ -19,6 +19,7 @@ use crate::integrator::sppm::{
     self, BeamMap, GatherContext, PhotonBeamMap, PhotonBuffers, PhotonMap, SppmSettings, VolumeEstimate,
     VolumeMap,
 };
+use crate::light::Light;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -215,7 +216,9 @@ const PTRACER_CHUNK: u64 = 1024;
 
 /// Renders `passes` of the particle tracer. Pixel i's camera ray finds emitters seen directly
 /// (the path tracer stopped at depth 1) and light path i the rest; every contribution is
-/// splatted on its own ([`splat::Splats`]), so the sums do not depend on the threads.
+/// splatted on its own ([`splat::Splats`]), so the sums do not depend on the threads. Scenes
+/// whose lights cannot be seen (points, spots, beams, the sun) trace no camera rays: those
+/// would add exact zeros.
 fn ptracer_passes(scene: &Scene, settings: &PathSettings, seed: u64, passes: Range<u64>) -> FilmSum {
     let mut film = FilmSum::new(scene.width(), scene.height());
     let seen = PathSettings {
@@ -223,16 +226,19 @@ fn ptracer_passes(scene: &Scene, settings: &PathSettings, seed: u64, passes: Ran
         rr_depth: settings.rr_depth,
     };
     let (w, pixels) = (scene.width() as u64, scene.width() as u64 * scene.height() as u64);
+    let visible = scene.environment.is_some() || scene.lights.iter().any(|l| matches!(l, Light::Area(_)));
     for pass in passes {
         let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(PTRACER_CHUNK))
             .into_par_iter()
             .map(|c| {
                 let mut out = splat::Splats::new();
                 for i in c * PTRACER_CHUNK..((c + 1) * PTRACER_CHUNK).min(pixels) {
-                    let (x, y) = ((i % w) as u32, (i / w) as u32);
-                    let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
-                    let at = Vec2::new(x as f32, y as f32) + u_pixel;
-                    out.add(scene, at, path::radiance(scene, &seen, ray, &mut sampler));
+                    if visible {
+                        let (x, y) = ((i % w) as u32, (i / w) as u32);
+                        let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
+                        let at = Vec2::new(x as f32, y as f32) + u_pixel;
+                        out.add(scene, at, path::radiance(scene, &seen, ray, &mut sampler));
+                    }
                     ptracer::trace_light_path(scene, settings, seed, pass, i, &mut |at, l| {
                         out.add(scene, at, l)
                     });
