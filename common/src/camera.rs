@@ -13,8 +13,6 @@ use crate::sampling::square_to_uniform_disk_concentric;
 pub struct Camera {
     /// Camera to world.
     pub to_world: Mat4,
-    /// World to camera, `to_world`'s inverse: a particle tracer projects every light vertex.
-    pub from_world: Mat4,
     /// tan(fov/2) along the image's x axis.
     pub tan_half_x: f32,
     /// tan(fov/2) along the image's y axis.
@@ -67,7 +65,7 @@ impl Camera {
     /// the pixel's mean is made of. None if `p` is behind the camera, nearer than the near clip
     /// or off the film.
     pub fn connect(&self, p: Vec3A, u_lens: Vec2) -> Option<CameraConnection> {
-        let local = self.from_world.transform_point3a(p);
+        let local = self.to_world.inverse().transform_point3a(p);
         let lens = if self.aperture_radius > 0.0 {
             let l = square_to_uniform_disk_concentric(u_lens) * self.aperture_radius;
             Vec3A::new(l.x, l.y, 0.0)

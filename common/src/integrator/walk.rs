@@ -140,27 +140,24 @@ impl Walk {
     ) -> Event<'s> {
         self.advance(scene, |walk, m, t_surface| {
             let med = &scene.media[m as usize];
-            match med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d()) {
-                Flight::Collision { t, weight } => {
-                    let s = Stretch {
-                        medium: m,
-                        flight: t,
-                        surface: t_surface,
-                    };
-                    stretch(walk, s, sampler);
-                    Some(Event::Medium {
-                        p: walk.ray.at(t),
-                        medium: m,
-                        weight,
-                    })
-                }
+            let flight = med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d());
+            let end = match flight {
+                Flight::Collision { t, .. } => t,
+                Flight::Passed { .. } => t_surface,
+            };
+            let s = Stretch {
+                medium: m,
+                flight: end,
+                surface: t_surface,
+            };
+            stretch(walk, s, sampler);
+            match flight {
+                Flight::Collision { t, weight } => Some(Event::Medium {
+                    p: walk.ray.at(t),
+                    medium: m,
+                    weight,
+                }),
                 Flight::Passed { weight } => {
-                    let s = Stretch {
-                        medium: m,
-                        flight: t_surface,
-                        surface: t_surface,
-                    };
-                    stretch(walk, s, sampler);
                     walk.beta *= weight;
                     None
                 }

@@ -535,7 +535,6 @@ impl<'a> Builder<'a> {
         };
         let camera = Camera {
             to_world,
-            from_world: to_world.inverse(),
             tan_half_x: tan_half_x as f32,
             tan_half_y: (tan_half_x / aspect) as f32,
             width,
