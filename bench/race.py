@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Equal-time race against Mitsuba 3: renders each scene with our path tracer and SPPM and with
-Mitsuba 3's path integrator (and, on the caustic scene, both renderers' particle tracers too) for
-the same wall time, back to back, and prints each one's RMSE against the scene's Mitsuba
-reference, the samples (or iterations) reached, and the ratios. Mitsuba's column is its best
+Mitsuba 3's path integrator (and, on the caustic scene, both renderers' particle tracers too; our
+hybrid where the reference holds the caustics) for the same wall time, back to back, and prints
+each one's RMSE against the scene's Mitsuba reference, the samples (or iterations) reached, and the ratios. Mitsuba's column is its best
 method on the scene; the ratio is our best method's.
 
 Mitsuba comes from PyPI into a local virtual environment that this script makes if it is missing
@@ -31,21 +31,23 @@ SHARED = os.path.join(ROOT, "..", "shared", "scenes-ref")
 REFS = os.path.join(ROOT, "tests", "refs")
 LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so"
 
-# name, scene, reference, defines, Mitsuba's methods (None: the scene's own integrator): every
-# scene's reference is Mitsuba 3.9.1's.
+# name, scene, reference, defines, Mitsuba's methods (None: the scene's own integrator), our
+# methods beyond path and SPPM: every scene's reference is Mitsuba 3.9.1's. The hybrid races
+# where the reference holds the scene's caustics (Mitsuba's path tracer finds an area light's;
+# on `lights` it misses the spot light's, which the hybrid renders).
 PATH = [None]
 SCENES = [
-    ("cbox", os.path.join(SHARED, "cbox.xml"), os.path.join(SHARED, "cbox.exr"), {"res": "256"}, PATH),
+    ("cbox", os.path.join(SHARED, "cbox.xml"), os.path.join(SHARED, "cbox.exr"), {"res": "256"}, PATH, []),
     ("cbox-spheres", os.path.join(SHARED, "cbox-spheres.xml"), os.path.join(SHARED, "cbox-spheres.exr"),
-     {"res": "256"}, PATH),
-    ("fog", os.path.join(REFS, "fog.xml"), os.path.join(REFS, "fog.exr"), {"res": "64"}, PATH),
+     {"res": "256"}, PATH, ["hybrid"]),
+    ("fog", os.path.join(REFS, "fog.xml"), os.path.join(REFS, "fog.exr"), {"res": "64"}, PATH, []),
     ("lights (thin lens, spot, glass)", os.path.join(REFS, "lights.xml"), os.path.join(REFS, "lights.exr"),
-     {"res": "128"}, PATH),
+     {"res": "128"}, PATH, []),
     # The glass ball is out of the camera's view, so the particle tracer renders all of it.
     ("caustic (spot through glass)", os.path.join(REFS, "caustic.xml"), os.path.join(REFS, "caustic.exr"),
-     {"res": "128"}, ["path", "ptracer"]),
-    ("textures", os.path.join(REFS, "textures.xml"), os.path.join(REFS, "textures.exr"), {}, PATH),
-    ("environment", os.path.join(REFS, "environment.xml"), os.path.join(REFS, "environment.exr"), {}, PATH),
+     {"res": "128"}, ["path", "ptracer"], ["ptracer", "hybrid"]),
+    ("textures", os.path.join(REFS, "textures.xml"), os.path.join(REFS, "textures.exr"), {}, PATH, []),
+    ("environment", os.path.join(REFS, "environment.xml"), os.path.join(REFS, "environment.exr"), {}, PATH, []),
 ]
 
 
@@ -144,13 +146,12 @@ def main():
           "RMSE against Mitsuba 3.9.1 references (samples or iterations reached)")
     print("| scene | ours, path | ours, SPPM | Mitsuba 3, best method | best of ours / Mitsuba (RMSE) | path spp ours / Mitsuba |")
     print("|---|---|---|---|---|---|")
-    for name, scene, ref, defines, methods in SCENES:
+    for name, scene, ref, defines, methods, our_extra in SCENES:
         if args.only and not any(name.startswith(o) for o in args.only):
             continue
         path = ours(args.coordinator, scene, ref, defines, "path", args.seconds, py)
         sppm = ours(args.coordinator, scene, ref, defines, "sppm", args.seconds, py)
-        # Where Mitsuba races its particle tracer, ours races too.
-        extra = [ours(args.coordinator, scene, ref, defines, "ptracer", args.seconds, py)] if "ptracer" in methods else []
+        extra = [ours(args.coordinator, scene, ref, defines, m, args.seconds, py) for m in our_extra]
         runs = [mitsuba(py, scene, ref, defines, args.seconds, m) for m in methods]
         mi_r = min(runs, key=lambda r: r.get("rmse", float("inf")))
         mi_path = next((r for r, m in zip(runs, methods) if m in (None, "path")), mi_r)
@@ -158,8 +159,8 @@ def main():
         ratio = best / mi_r["rmse"] if "error" not in mi_r else float("nan")
         spp_ratio = (path["spp"] / mi_path["spp"]) if "error" not in path and "error" not in mi_path and path["spp"] else float("nan")
         print(f"| {name} | {cell(path)} | {cell(sppm)} | {cell(mi_r)} | {ratio:.2f} | {spp_ratio:.2f} |", flush=True)
-        for r in extra:
-            print(f"|   (ours, ptracer: {cell(r)}) | | | | | |", flush=True)
+        for r, m in zip(extra, our_extra):
+            print(f"|   (ours, {m}: {cell(r)}) | | | | | |", flush=True)
         for r, m in zip(runs, methods):
             if r is not mi_r:
                 print(f"|   (Mitsuba's {m}: {cell(r)}) | | | | | |", flush=True)

@@ -24,6 +24,8 @@ pub enum Integrator {
     Sppm,
     /// Mitsuba's particle tracer.
     Ptracer,
+    /// Path tracing for all light but caustics, particle tracing for caustics.
+    Hybrid,
 }
 
 impl Integrator {
@@ -162,7 +164,7 @@ impl JobSettings {
         let mut warnings = Vec::new();
         let integrator = self.integrator.unwrap_or_else(|| Integrator::of_scene(scene));
         let (method, declared) = match integrator {
-            Integrator::Path | Integrator::Direct | Integrator::Ptracer => {
+            Integrator::Path | Integrator::Direct | Integrator::Ptracer | Integrator::Hybrid => {
                 for (name, given) in [
                     ("photons", self.photons.is_some()),
                     ("radius", self.radius.is_some()),
@@ -178,6 +180,7 @@ impl JobSettings {
                 let method = match integrator {
                     Integrator::Path => Method::Path(PathSettings::from_scene(scene)),
                     Integrator::Direct => Method::Direct(DirectSettings::from_scene(scene)),
+                    Integrator::Hybrid => Method::Hybrid(PathSettings::from_scene(scene)),
                     _ => Method::Ptracer(PathSettings::from_scene(scene)),
                 };
                 (method, None)

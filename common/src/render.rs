@@ -9,16 +9,17 @@ use rayon::prelude::*;
 
 use glam::{Vec2, Vec3A};
 
+use crate::bsdf::Bsdf;
 use crate::color::Rgb;
 use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
 use crate::integrator::direct_illumination::{self, DirectSettings};
 use crate::integrator::path::{self, PathSettings};
-use crate::integrator::ptracer;
 use crate::integrator::sppm::{
     self, BeamMap, GatherContext, PhotonBeamMap, PhotonBuffers, PhotonMap, SppmSettings, VolumeEstimate,
     VolumeMap,
 };
+use crate::integrator::{Share, ptracer};
 use crate::light::Light;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
@@ -39,6 +40,9 @@ pub enum Method {
     /// Mitsuba's particle tracer: a pass is one light path per pixel, connected to the camera
     /// at every bounce, and one camera ray per pixel for emitters seen directly.
     Ptracer(PathSettings),
+    /// Hybrid path and particle tracing ([`crate::integrator::Share`]): a pass is one camera
+    /// path per pixel for all light but caustics, and one light path per pixel for caustics.
+    Hybrid(PathSettings),
 }
 
 impl Method {
@@ -49,6 +53,7 @@ impl Method {
             Method::Direct(_) => "direct",
             Method::Sppm(_) => "sppm",
             Method::Ptracer(_) => "ptracer",
+            Method::Hybrid(_) => "hybrid",
         }
     }
 }
@@ -67,7 +72,7 @@ pub struct RenderSettings {
 pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64>) -> FilmSum {
     match &settings.method {
         Method::Path(p) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
-            path::radiance(scene, p, ray, sampler)
+            path::radiance(scene, p, Share::All, ray, sampler)
         }),
         Method::Direct(d) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
             direct_illumination::radiance(scene, d, ray, sampler)
@@ -76,7 +81,8 @@ pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64
             let radii = s.radii(passes.clone());
             render_sppm_iterations(scene, settings.seed, s, passes, &radii)
         }
-        Method::Ptracer(p) => ptracer_passes(scene, p, settings.seed, passes),
+        Method::Ptracer(p) => ptracer_passes(scene, p, Share::All, settings.seed, passes),
+        Method::Hybrid(p) => ptracer_passes(scene, p, Share::LightSide, settings.seed, passes),
     }
 }
 
@@ -89,7 +95,9 @@ pub fn render_batch(
     radii: &[[f32; 2]],
 ) -> FilmSum {
     match &settings.method {
-        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) => render_passes(scene, settings, passes),
+        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) | Method::Hybrid(_) => {
+            render_passes(scene, settings, passes)
+        }
         Method::Sppm(s) => render_sppm_iterations(scene, settings.seed, s, passes, radii),
     }
 }
@@ -219,14 +227,33 @@ const PTRACER_CHUNK: u64 = 1024;
 /// splatted on its own ([`splat::Splats`]), so the sums do not depend on the threads. Scenes
 /// whose lights cannot be seen (points, spots, beams, the sun) trace no camera rays: those
 /// would add exact zeros.
-fn ptracer_passes(scene: &Scene, settings: &PathSettings, seed: u64, passes: Range<u64>) -> FilmSum {
+///
+/// With the light paths' share [`Share::LightSide`] (the hybrid method), the camera paths are
+/// the path tracer's, in [`Share::CameraSide`].
+fn ptracer_passes(
+    scene: &Scene,
+    settings: &PathSettings,
+    light_share: Share,
+    seed: u64,
+    passes: Range<u64>,
+) -> FilmSum {
     let mut film = FilmSum::new(scene.width(), scene.height());
-    let seen = PathSettings {
-        max_depth: Some(1),
-        rr_depth: settings.rr_depth,
+    let (camera, camera_share) = match light_share {
+        Share::LightSide => (*settings, Share::CameraSide),
+        _ => (
+            PathSettings {
+                max_depth: Some(1),
+                rr_depth: settings.rr_depth,
+            },
+            Share::All,
+        ),
     };
     let (w, pixels) = (scene.width() as u64, scene.width() as u64 * scene.height() as u64);
-    let visible = scene.environment.is_some() || scene.lights.iter().any(|l| matches!(l, Light::Area(_)));
+    let visible = light_share == Share::LightSide
+        || scene.environment.is_some()
+        || scene.lights.iter().any(|l| matches!(l, Light::Area(_)));
+    // The hybrid's light paths count only from a specular bounce: none without such a surface.
+    let light_paths = light_share != Share::LightSide || scene.bsdfs.iter().any(Bsdf::has_delta);
     for pass in passes {
         let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(PTRACER_CHUNK))
             .into_par_iter()
@@ -237,11 +264,23 @@ fn ptracer_passes(scene: &Scene, settings: &PathSettings, seed: u64, passes: Ran
                         let (x, y) = ((i % w) as u32, (i / w) as u32);
                         let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
                         let at = Vec2::new(x as f32, y as f32) + u_pixel;
-                        out.add(scene, at, path::radiance(scene, &seen, ray, &mut sampler));
+                        out.add(
+                            scene,
+                            at,
+                            path::radiance(scene, &camera, camera_share, ray, &mut sampler),
+                        );
                     }
-                    ptracer::trace_light_path(scene, settings, seed, pass, i, &mut |at, l| {
-                        out.add(scene, at, l)
-                    });
+                    if light_paths {
+                        ptracer::trace_light_path(
+                            scene,
+                            settings,
+                            light_share,
+                            seed,
+                            pass,
+                            i,
+                            &mut |at, l| out.add(scene, at, l),
+                        );
+                    }
                 }
                 out
             })
@@ -333,7 +372,7 @@ mod tests {
             assert!(!scene.filter.is_box());
             let path = PathSettings::from_scene(&scene);
             // The particle tracer's contributions land anywhere on the film.
-            for method in [Method::Path(path), Method::Ptracer(path)] {
+            for method in [Method::Path(path), Method::Ptracer(path), Method::Hybrid(path)] {
                 let settings = RenderSettings { seed: 3, method };
                 let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
                 let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));

@@ -153,8 +153,8 @@ pub struct ConvergeArgs {
     /// Reference image (EXR) of the same resolution.
     #[arg(long)]
     pub reference: PathBuf,
-    /// Methods to compare, comma-separated: path, ptracer, sppm (its default volume estimate),
-    /// sppm-beam, sppm-point, sppm-photon-beams (SPPM with that volume estimate).
+    /// Methods to compare, comma-separated: path, ptracer, hybrid, sppm (its default volume
+    /// estimate), sppm-beam, sppm-point, sppm-photon-beams (SPPM with that volume estimate).
     #[arg(long, default_value = "path,sppm")]
     pub methods: String,
     /// Render time per line, seconds.
@@ -203,6 +203,11 @@ pub enum Integrator {
     /// bounce; caustics on what the camera sees directly, nothing seen through glass or in
     /// mirrors.
     Ptracer,
+    /// The path tracer for all light but caustics, and the particle tracer for caustics
+    /// (light whose first bounce off the light is specular, landing on something the camera
+    /// sees directly): caustics of point and spot lights at the particle tracer's speed, the
+    /// rest at the path tracer's.
+    Hybrid,
 }
 
 /// SPPM's volume estimator.
@@ -236,7 +241,8 @@ pub struct JobArgs {
     /// path, direct with direct, sppm with sppm, ptracer with ptracer; path if it has none].
     #[arg(long, value_enum)]
     pub integrator: Option<Integrator>,
-    /// Path tracing, direct and ptracer: samples (light paths for ptracer) per pixel (passes).
+    /// Path tracing, direct, ptracer and hybrid: samples (light paths for ptracer) per pixel
+    /// (passes).
     /// Default: the scene's sampler sample_count
     /// (`render`: no limit when --time-limit is given).
     #[arg(long)]
@@ -292,12 +298,22 @@ impl JobArgs {
             Integrator::Direct => JobIntegrator::Direct,
             Integrator::Sppm => JobIntegrator::Sppm,
             Integrator::Ptracer => JobIntegrator::Ptracer,
+            Integrator::Hybrid => JobIntegrator::Hybrid,
         });
         let passes = match (integrator, self.spp, self.iterations) {
             (_, Some(_), Some(_)) => {
-                anyhow::bail!("give --spp (path, direct, ptracer) or --iterations (sppm), not both")
+                anyhow::bail!("give --spp (path, direct, ptracer, hybrid) or --iterations (sppm), not both")
             }
-            (Some(JobIntegrator::Path | JobIntegrator::Direct | JobIntegrator::Ptracer), _, Some(_)) => {
+            (
+                Some(
+                    JobIntegrator::Path
+                    | JobIntegrator::Direct
+                    | JobIntegrator::Ptracer
+                    | JobIntegrator::Hybrid,
+                ),
+                _,
+                Some(_),
+            ) => {
                 anyhow::bail!("--iterations applies to --integrator sppm; use --spp")
             }
             (Some(JobIntegrator::Sppm), Some(_), _) => {
@@ -308,7 +324,9 @@ impl JobArgs {
         };
         if matches!(
             integrator,
-            Some(JobIntegrator::Path | JobIntegrator::Direct | JobIntegrator::Ptracer)
+            Some(
+                JobIntegrator::Path | JobIntegrator::Direct | JobIntegrator::Ptracer | JobIntegrator::Hybrid
+            )
         ) {
             for (flag, given) in [
                 ("--photons", self.photons.is_some()),

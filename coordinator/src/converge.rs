@@ -132,14 +132,14 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
     let mut lines = Vec::new();
     for m in args.methods.split(',').map(str::trim) {
         match m {
-            // SPPM's settings do not apply to the path tracer's or the particle tracer's line.
-            "path" | "ptracer" => lines.push((
+            // SPPM's settings do not apply to the path tracer's, particle tracer's or hybrid's line.
+            "path" | "ptracer" | "hybrid" => lines.push((
                 m.to_string(),
                 JobSettings {
-                    integrator: Some(if m == "path" {
-                        JobIntegrator::Path
-                    } else {
-                        JobIntegrator::Ptracer
+                    integrator: Some(match m {
+                        "path" => JobIntegrator::Path,
+                        "ptracer" => JobIntegrator::Ptracer,
+                        _ => JobIntegrator::Hybrid,
                     }),
                     photons: None,
                     k: None,
@@ -187,7 +187,7 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                 }
             }
             other => bail!(
-                "unknown method \"{other}\" in --methods (path, ptracer, sppm, sppm-beam, sppm-point, sppm-photon-beams)"
+                "unknown method \"{other}\" in --methods (path, ptracer, hybrid, sppm, sppm-beam, sppm-point, sppm-photon-beams)"
             ),
         }
     }

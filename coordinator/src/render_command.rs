@@ -55,7 +55,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     eprintln!("method: {method}{source}");
     let (unit, radii_schedule) = match &resolved.render.method {
-        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) => ("passes", None),
+        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) | Method::Hybrid(_) => ("passes", None),
         Method::Sppm(s) => {
             eprintln!(
                 "SPPM: {} photons per iteration, initial radius {:.4e} (volume {:.4e}), alpha {:.3}, k {}",

@@ -129,26 +129,29 @@ fn two_workers_give_the_bytes_of_a_local_render() {
     assert!(same, "farm and local bytes differ");
 }
 
-/// A particle tracer's job: its light paths land anywhere on the film, and the farm's sums
-/// must still merge to the local bytes.
+/// Jobs of the particle tracer and of the hybrid method (cbox-spheres' glass gives it caustic
+/// light paths): their light paths land anywhere on the film, and the farm's sums must still
+/// merge to the local bytes.
 #[test]
-fn a_particle_tracer_job_gives_the_bytes_of_a_local_render() {
-    const PTRACER: &[&str] = &[
-        "--integrator",
-        "ptracer",
-        "--spp",
-        "24",
-        "--seed",
-        "5",
-        "-D",
-        "res=48",
-        "-D",
-        "filter=gaussian",
-    ];
-    let (s, same) = two_workers_render(PTRACER, "0.05");
-    assert_eq!(s["integrator"], "ptracer");
-    assert_eq!(s["iterations_done"], 24);
-    assert!(same, "farm and local bytes differ");
+fn light_path_jobs_give_the_bytes_of_a_local_render() {
+    for method in ["ptracer", "hybrid"] {
+        let job = [
+            "--integrator",
+            method,
+            "--spp",
+            "24",
+            "--seed",
+            "5",
+            "-D",
+            "res=48",
+            "-D",
+            "filter=gaussian",
+        ];
+        let (s, same) = two_workers_render(&job, "0.05");
+        assert_eq!(s["integrator"], method);
+        assert_eq!(s["iterations_done"], 24);
+        assert!(same, "{method}: farm and local bytes differ");
+    }
 }
 
 #[test]

@@ -254,6 +254,18 @@ impl Bsdf {
         }
     }
 
+    /// Whether a sample can take a delta lobe (a mask's pass-through counts): only then can a
+    /// light path bounce specularly off it, which the hybrid method's particle tracer needs.
+    pub fn has_delta(&self) -> bool {
+        match self {
+            Bsdf::Diffuse(_) | Bsdf::Principled(_) | Bsdf::RoughDielectric(_) | Bsdf::Null => false,
+            Bsdf::Plastic(p) => p.roughness.is_none(),
+            Bsdf::Conductor(c) => c.roughness.is_none(),
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Mask(_) => true,
+            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_delta() || pair.1.has_delta(),
+        }
+    }
+
     /// Whether this is no surface at all: paths and photons cross it without a bounce.
     pub fn is_null(&self) -> bool {
         matches!(self, Bsdf::Null)

@@ -630,6 +630,38 @@ fn white_furnace_never_creates_energy() {
     }
 }
 
+/// `has_delta` says whether samples ever take a delta lobe: a wrong no would lose the hybrid's
+/// caustics off that material, a wrong yes would waste its light paths.
+#[test]
+fn has_delta_says_whether_samples_take_a_delta_lobe() {
+    let smooth = [
+        ("glass", glass()),
+        ("smooth conductor", conductor(None)),
+        ("smooth plastic", plastic(None, 0.5)),
+        (
+            "mask over diffuse",
+            Bsdf::Mask(Box::new((diffuse(0.5), 0.6.into()))),
+        ),
+        (
+            "blend of diffuse and smooth conductor",
+            Bsdf::Blend(Box::new((diffuse(0.5), conductor(None))), 0.5.into()),
+        ),
+    ];
+    let mut s = Sampler::new(4, Stream::Camera, 0, 0);
+    for (name, b) in cases().into_iter().chain(smooth) {
+        let mut any_delta = false;
+        for wi in incoming() {
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                for _ in 0..200 {
+                    let (u1, u2) = (s.next_1d(), s.next_2d());
+                    any_delta |= b.sample(UV, wi, u1, u2, mode).is_some_and(|bs| bs.delta);
+                }
+            }
+        }
+        assert_eq!(any_delta, b.has_delta(), "{name}: has_delta is {}", b.has_delta());
+    }
+}
+
 #[test]
 fn smooth_lobes_have_no_density() {
     let wi = Vec3A::new(0.0, 0.6, 0.8);

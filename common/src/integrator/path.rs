@@ -5,6 +5,7 @@
 //! point and spot lights are sampled equiangularly along the ray rather than at the sampled
 //! collision (Mitsuba's volpath), which bounds the noise of a light inside fog.
 
+use super::Share;
 use super::direct;
 use super::walk::{Event, Walk};
 use crate::bsdf::TransportMode;
@@ -34,11 +35,21 @@ impl PathSettings {
     }
 }
 
-/// Radiance arriving along `ray` (unit direction), which starts in the camera's medium.
-pub fn radiance(scene: &Scene, settings: &PathSettings, ray: Ray, sampler: &mut Sampler) -> Rgb {
+/// Radiance arriving along `ray` (unit direction), which starts in the camera's medium, by the
+/// paths of `share` ([`Share::All`] or [`Share::CameraSide`]).
+pub fn radiance(
+    scene: &Scene,
+    settings: &PathSettings,
+    share: Share,
+    ray: Ray,
+    sampler: &mut Sampler,
+) -> Rgb {
     let max_depth = settings.max_depth.unwrap_or(u32::MAX);
     let mut l = Rgb::ZERO;
     let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
+    // Whether emission found after a specular bounce is the particle tracer's: in its share,
+    // once the first bounce (at x1) was not specular.
+    let mut leave_caustics = false;
     loop {
         // Point-like lights are sampled along each stretch of medium (from one collision drawn
         // equiangularly about the light), not at the flight's collision, whose distance does not
@@ -52,12 +63,15 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, ray: Ray, sampler: &mut 
         match event {
             // A path that leaves the scene finds the environment, if there is one, and ends.
             Event::Gone => {
-                l += walk.escaped(scene);
+                if !(leave_caustics && walk.after_specular()) {
+                    l += walk.escaped(scene);
+                }
                 break;
             }
             // Scattering in a medium: light sampling, then the phase function.
             Event::Medium { p, medium, weight } => {
                 walk.beta *= weight * scene.media[medium as usize].albedo;
+                leave_caustics |= walk.depth == 0 && share == Share::CameraSide;
                 if walk.depth + 1 >= max_depth {
                     break;
                 }
@@ -72,7 +86,9 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, ray: Ray, sampler: &mut 
             }
             Event::Surface(hit) => {
                 // Emission found by the camera ray or by BSDF sampling.
-                l += walk.emission(scene, &hit);
+                if !(leave_caustics && walk.after_specular()) {
+                    l += walk.emission(scene, &hit);
+                }
                 if walk.depth + 1 >= max_depth {
                     break;
                 }
@@ -84,6 +100,7 @@ pub fn radiance(scene: &Scene, settings: &PathSettings, ray: Ray, sampler: &mut 
                 let Some(bs) = Walk::sample_bsdf(&hit, sampler, TransportMode::Radiance) else {
                     break;
                 };
+                leave_caustics |= walk.depth == 0 && share == Share::CameraSide && !bs.delta;
                 walk.follow(&hit, &bs);
             }
         }

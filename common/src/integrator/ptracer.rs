@@ -13,6 +13,7 @@
 
 use glam::{Vec2, Vec3A};
 
+use super::Share;
 use super::path::PathSettings;
 use super::walk::{Event, Walk};
 use crate::bsdf::TransportMode;
@@ -30,6 +31,7 @@ use crate::scene::Scene;
 pub fn trace_light_path(
     scene: &Scene,
     settings: &PathSettings,
+    share: Share,
     seed: u64,
     pass: u64,
     index: u64,
@@ -43,10 +45,19 @@ pub fn trace_light_path(
     let Some(mut walk) = Walk::from_light(scene, &mut s, 1.0) else {
         return;
     };
+    // In the hybrid's light-side share, a light path counts only from a specular first bounce
+    // on: the path tracer's light sampling finds the rest.
+    let caustics_only = share == Share::LightSide;
     // Each vertex connects with a path one bounce longer than the light path so far.
     while walk.depth + 1 < max_depth {
         match walk.next_event(scene, &mut s) {
             Event::Gone => return,
+            Event::Medium { .. } if caustics_only && walk.depth == 0 => return,
+            Event::Surface(hit) if caustics_only && walk.depth == 0 => {
+                if !walk.bounce_light(&hit, &mut s) || !walk.after_specular() {
+                    return;
+                }
+            }
             Event::Medium { p, medium, weight } => {
                 walk.beta *= weight;
                 let med = &scene.media[medium as usize];

@@ -221,6 +221,11 @@ impl Walk {
         }
     }
 
+    /// Whether the last bounce sampled a delta lobe.
+    pub fn after_specular(&self) -> bool {
+        self.prev.as_ref().is_some_and(|p| p.delta)
+    }
+
     /// What a walk that left the scene finds there (an environment light), times the
     /// throughput, weighted against light sampling as [`Walk::emission`] is.
     pub fn escaped(&self, scene: &Scene) -> Rgb {
