@@ -9,7 +9,6 @@ use rayon::prelude::*;
 
 use glam::{Vec2, Vec3A};
 
-use crate::bsdf::Bsdf;
 use crate::color::Rgb;
 use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
@@ -20,7 +19,6 @@ use crate::integrator::sppm::{
     VolumeMap,
 };
 use crate::integrator::{Share, ptracer};
-use crate::light::Light;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -249,11 +247,9 @@ fn ptracer_passes(
         ),
     };
     let (w, pixels) = (scene.width() as u64, scene.width() as u64 * scene.height() as u64);
-    let visible = light_share == Share::LightSide
-        || scene.environment.is_some()
-        || scene.lights.iter().any(|l| matches!(l, Light::Area(_)));
+    let visible = light_share == Share::LightSide || scene.has_visible_lights();
     // The hybrid's light paths count only from a specular bounce: none without such a surface.
-    let light_paths = light_share != Share::LightSide || scene.bsdfs.iter().any(Bsdf::has_delta);
+    let light_paths = light_share != Share::LightSide || scene.has_specular_surfaces();
     for pass in passes {
         let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(PTRACER_CHUNK))
             .into_par_iter()

@@ -274,6 +274,17 @@ impl Scene {
         Some((le, self.light_sampling.pmf(i as usize) * light.environment_pdf(d)))
     }
 
+    /// Whether a camera ray can see a light (an area light or an environment): points, spots,
+    /// beams and the sun cannot be seen, only their light.
+    pub fn has_visible_lights(&self) -> bool {
+        self.environment.is_some() || self.lights.iter().any(|l| matches!(l, Light::Area(_)))
+    }
+
+    /// Whether any material can reflect or refract specularly (see [`Bsdf::has_delta`]).
+    pub fn has_specular_surfaces(&self) -> bool {
+        self.bsdfs.iter().any(Bsdf::has_delta)
+    }
+
     /// Density of [`Scene::sample_light`] returning point `sp` on area light `light`, from `p`.
     pub fn light_pdf(&self, light: u32, p: Vec3A, sp: &SurfacePoint) -> f32 {
         match &self.lights[light as usize] {
