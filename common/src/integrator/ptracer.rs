@@ -27,7 +27,8 @@ use crate::scene::Scene;
 /// connection to the camera. A pass of one light path per pixel, with the values added into the
 /// pixels they land on, gives per pixel its mean times the pass count (see
 /// [`crate::camera::Camera::connect`]); emitters seen directly are not included (the camera
-/// finds those).
+/// finds those). Only the paths of `share` count: [`Share::All`], or the hybrid's caustics
+/// ([`Share::LightSide`]).
 pub fn trace_light_path(
     scene: &Scene,
     settings: &PathSettings,
