@@ -1,5 +1,7 @@
 //! Where methods fail or struggle (docs/stability.md reports each case with these figures).
 
+use photonfarm::integrator::path::PathSettings;
+use photonfarm::render::{Method, RenderSettings, render_passes};
 use photonfarm::scene::Scene;
 use photonfarm_tests::{
     channel_means, compare, load, reference, refs_dir, render_path, render_sppm, scenes_dir, sppm_settings,
@@ -10,7 +12,8 @@ fn stability(name: &str) -> std::path::PathBuf {
 }
 
 /// A spot light's caustic, seen directly and in a mirror: the path tracer's error stays at the
-/// level of the missing caustic while SPPM's falls. Reference: SPPM, 4096 iterations of 50,000
+/// level of the missing caustic, the hybrid's at the level of the mirrored one, while SPPM's
+/// falls. Reference: SPPM, 4096 iterations of 50,000
 /// photons, another seed (no independent renderer here renders these paths: Mitsuba 3's path
 /// tracers miss them like ours, and it has no photon mapper).
 #[test]
@@ -46,6 +49,30 @@ fn mirrored_caustic_converges_with_sppm_only() {
     );
     assert!(path_many.mse > 5.0 * sppm_many.mse);
     assert!(path_many.worst_mean_error() > 0.05 && sppm_many.worst_mean_error() < 0.02);
+    // The hybrid's light paths render the caustic seen directly, and neither side the one in
+    // the mirror (light → glass → floor → mirror → camera).
+    let hybrid = |passes| {
+        let settings = RenderSettings {
+            seed: 1,
+            method: Method::Hybrid(PathSettings::from_scene(&scene)),
+        };
+        compare(
+            &render_passes(&scene, &settings, 0..passes).image().unwrap(),
+            &reference,
+        )
+    };
+    let (hybrid_few, hybrid_many) = (hybrid(64), hybrid(1024));
+    eprintln!(
+        "mirrored caustic, hybrid: RMSE {:.4} (64 passes) -> {:.4} (1024), worst channel mean error {:.2}%",
+        hybrid_few.mse.sqrt(),
+        hybrid_many.mse.sqrt(),
+        100.0 * hybrid_many.worst_mean_error()
+    );
+    assert!(
+        hybrid_many.mse > 0.5 * hybrid_few.mse,
+        "the hybrid should not converge here"
+    );
+    assert!(hybrid_many.mse < 0.5 * path_many.mse && hybrid_many.mse > 2.0 * sppm_many.mse);
 }
 
 /// Glossy surfaces lit by a caustic (from an area light, which the path tracer can find): both
