@@ -79,8 +79,8 @@ pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64
             let radii = s.radii(passes.clone());
             render_sppm_iterations(scene, settings.seed, s, passes, &radii)
         }
-        Method::Ptracer(p) => ptracer_passes(scene, p, Share::All, settings.seed, passes),
-        Method::Hybrid(p) => ptracer_passes(scene, p, Share::LightSide, settings.seed, passes),
+        Method::Ptracer(p) => light_path_passes(scene, p, Share::All, settings.seed, passes),
+        Method::Hybrid(p) => light_path_passes(scene, p, Share::LightSide, settings.seed, passes),
     }
 }
 
@@ -217,18 +217,19 @@ fn camera_sample(scene: &Scene, seed: u64, pass: u64, x: u32, y: u32) -> (Ray, V
     (ray, u_pixel, sampler)
 }
 
-/// Light paths (and camera rays) per parallel task of a particle tracer's pass.
-const PTRACER_CHUNK: u64 = 1024;
+/// Light paths (and camera paths) per parallel task of a particle tracer's or hybrid's pass.
+const LIGHT_PATH_CHUNK: u64 = 1024;
 
-/// Renders `passes` of the particle tracer. Pixel i's camera ray finds emitters seen directly
-/// (the path tracer stopped at depth 1) and light path i the rest; every contribution is
-/// splatted on its own ([`splat::Splats`]), so the sums do not depend on the threads. Scenes
-/// whose lights cannot be seen (points, spots, beams, the sun) trace no camera rays: those
-/// would add exact zeros.
+/// Renders `passes` of the particle tracer or the hybrid method, the two whose light paths land
+/// anywhere on the film: every contribution is splatted on its own ([`splat::Splats`]), so the
+/// sums do not depend on the threads.
 ///
-/// With the light paths' share [`Share::LightSide`] (the hybrid method), the camera paths are
-/// the path tracer's, in [`Share::CameraSide`].
-fn ptracer_passes(
+/// For the particle tracer, pixel i's camera ray finds emitters seen directly (the path tracer
+/// stopped at depth 1) and light path i the rest. Scenes whose lights cannot be seen (points,
+/// spots, beams, the sun) trace no camera rays: those would add exact zeros. For the hybrid
+/// (light paths in [`Share::LightSide`]), pixel i's camera path is the path tracer's, in
+/// [`Share::CameraSide`], and scenes without a specular surface trace no light paths.
+fn light_path_passes(
     scene: &Scene,
     settings: &PathSettings,
     light_share: Share,
@@ -251,11 +252,11 @@ fn ptracer_passes(
     // The hybrid's light paths count only from a specular bounce: none without such a surface.
     let light_paths = light_share != Share::LightSide || scene.has_specular_surfaces();
     for pass in passes {
-        let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(PTRACER_CHUNK))
+        let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(LIGHT_PATH_CHUNK))
             .into_par_iter()
             .map(|c| {
                 let mut out = splat::Splats::new();
-                for i in c * PTRACER_CHUNK..((c + 1) * PTRACER_CHUNK).min(pixels) {
+                for i in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(pixels) {
                     if visible {
                         let (x, y) = ((i % w) as u32, (i / w) as u32);
                         let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
