@@ -2,8 +2,8 @@
 """Equal-time race against Mitsuba 3: renders each scene with our path tracer and SPPM and with
 Mitsuba 3's path integrator (and, on the caustic scene, both renderers' particle tracers too; our
 hybrid where the reference holds the caustics) for the same wall time, back to back, and prints
-each one's RMSE against the scene's Mitsuba reference, the samples (or iterations) reached, and the ratios. Mitsuba's column is its best
-method on the scene; the ratio is our best method's.
+each one's RMSE against the scene's Mitsuba reference, the samples (or iterations) reached, and
+the ratios. Mitsuba's column is its best method on the scene; the ratio is our best method's.
 
 Mitsuba comes from PyPI into a local virtual environment that this script makes if it is missing
 (never in CI):

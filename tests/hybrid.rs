@@ -3,23 +3,20 @@
 //! at all: the two shares must add up to the whole image, nothing missed, nothing twice.
 
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes};
-use photonfarm_tests::{check_convergence, load, refs_dir};
+use photonfarm::render::Method;
+use photonfarm_tests::{check_convergence, load, refs_dir, render_with};
 
 /// The hybrid on `refs/NAME.xml` against `refs/NAME.exr`: channel means within 1% at `passes`,
 /// the MSE under half that at a sixteenth of them.
 fn check(name: &str, passes: u64, seed: u64) {
     let scene = load(&refs_dir().join(format!("{name}.xml")), &[]);
-    let s = RenderSettings {
-        seed,
-        method: Method::Hybrid(PathSettings::from_scene(&scene)),
-    };
+    let method = Method::Hybrid(PathSettings::from_scene(&scene));
     check_convergence(
         &format!("{name}, hybrid"),
         name,
         (passes / 16, passes),
         0.01,
-        |n| render_passes(&scene, &s, 0..n),
+        |n| render_with(&scene, method, n, seed),
     );
 }
 

@@ -81,13 +81,14 @@ pub fn load(path: &Path, defines: &[(&str, &str)]) -> Scene {
     Scene::load(path, &defines).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// Renders passes [0, passes) with `method`.
+pub fn render_with(scene: &Scene, method: Method, passes: u64, seed: u64) -> FilmSum {
+    render_passes(scene, &RenderSettings { seed, method }, 0..passes)
+}
+
 /// Renders passes [0, spp) with the path tracer.
 pub fn render_path(scene: &Scene, spp: u64, seed: u64) -> FilmSum {
-    let settings = RenderSettings {
-        seed,
-        method: Method::Path(PathSettings::from_scene(scene)),
-    };
-    render_passes(scene, &settings, 0..spp)
+    render_with(scene, Method::Path(PathSettings::from_scene(scene)), spp, seed)
 }
 
 /// SPPM settings from the scene, with the given photon count.
@@ -99,11 +100,7 @@ pub fn sppm_settings(scene: &Scene, photons: u64) -> SppmSettings {
 
 /// Renders SPPM iterations [0, n).
 pub fn render_sppm(scene: &Scene, settings: SppmSettings, n: u64, seed: u64) -> FilmSum {
-    let settings = RenderSettings {
-        seed,
-        method: Method::Sppm(settings),
-    };
-    render_passes(scene, &settings, 0..n)
+    render_with(scene, Method::Sppm(settings), n, seed)
 }
 
 /// Reads a reference EXR.

@@ -1,10 +1,11 @@
 //! Where methods fail or struggle (docs/stability.md reports each case with these figures).
 
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes};
+use photonfarm::render::Method;
 use photonfarm::scene::Scene;
 use photonfarm_tests::{
-    channel_means, compare, load, reference, refs_dir, render_path, render_sppm, scenes_dir, sppm_settings,
+    channel_means, compare, load, reference, refs_dir, render_path, render_sppm, render_with, scenes_dir,
+    sppm_settings,
 };
 
 fn stability(name: &str) -> std::path::PathBuf {
@@ -13,9 +14,9 @@ fn stability(name: &str) -> std::path::PathBuf {
 
 /// A spot light's caustic, seen directly and in a mirror: the path tracer's error stays at the
 /// level of the missing caustic, the hybrid's at the level of the mirrored one, while SPPM's
-/// falls. Reference: SPPM, 4096 iterations of 50,000
-/// photons, another seed (no independent renderer here renders these paths: Mitsuba 3's path
-/// tracers miss them like ours, and it has no photon mapper).
+/// falls. Reference: SPPM, 4096 iterations of 50,000 photons, another seed (no independent
+/// renderer here renders these paths: Mitsuba 3's path tracers miss them like ours, and it has
+/// no photon mapper).
 #[test]
 fn mirrored_caustic_converges_with_sppm_only() {
     let scene = load(&stability("mirrored-caustic.xml"), &[]);
@@ -52,12 +53,9 @@ fn mirrored_caustic_converges_with_sppm_only() {
     // The hybrid's light paths render the caustic seen directly, and neither side the one in
     // the mirror (light → glass → floor → mirror → camera).
     let hybrid = |passes| {
-        let settings = RenderSettings {
-            seed: 1,
-            method: Method::Hybrid(PathSettings::from_scene(&scene)),
-        };
+        let method = Method::Hybrid(PathSettings::from_scene(&scene));
         compare(
-            &render_passes(&scene, &settings, 0..passes).image().unwrap(),
+            &render_with(&scene, method, passes, 1).image().unwrap(),
             &reference,
         )
     };

@@ -242,9 +242,8 @@ pub struct JobArgs {
     #[arg(long, value_enum)]
     pub integrator: Option<Integrator>,
     /// Path tracing, direct, ptracer and hybrid: samples (light paths for ptracer) per pixel
-    /// (passes).
-    /// Default: the scene's sampler sample_count
-    /// (`render`: no limit when --time-limit is given).
+    /// (passes). Default: the scene's sampler sample_count (`render`: no limit when
+    /// --time-limit is given).
     #[arg(long)]
     pub spp: Option<u64>,
     /// SPPM: iterations (each a photon pass and one sample per pixel). Default: the scene's
@@ -304,16 +303,7 @@ impl JobArgs {
             (_, Some(_), Some(_)) => {
                 anyhow::bail!("give --spp (path, direct, ptracer, hybrid) or --iterations (sppm), not both")
             }
-            (
-                Some(
-                    JobIntegrator::Path
-                    | JobIntegrator::Direct
-                    | JobIntegrator::Ptracer
-                    | JobIntegrator::Hybrid,
-                ),
-                _,
-                Some(_),
-            ) => {
+            (Some(i), _, Some(_)) if i != JobIntegrator::Sppm => {
                 anyhow::bail!("--iterations applies to --integrator sppm; use --spp")
             }
             (Some(JobIntegrator::Sppm), Some(_), _) => {
@@ -322,12 +312,7 @@ impl JobArgs {
             // Without --integrator the scene decides the method; either flag counts passes.
             (_, spp, it) => spp.or(it),
         };
-        if matches!(
-            integrator,
-            Some(
-                JobIntegrator::Path | JobIntegrator::Direct | JobIntegrator::Ptracer | JobIntegrator::Hybrid
-            )
-        ) {
+        if integrator.is_some_and(|i| i != JobIntegrator::Sppm) {
             for (flag, given) in [
                 ("--photons", self.photons.is_some()),
                 ("--radius", self.radius.is_some()),
