@@ -24,4 +24,5 @@ pub mod protocol;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod sobol;
 pub mod texture;

@@ -42,7 +42,8 @@ pub fn trace_light_path(
     if scene.light_selection.is_empty() || max_depth < 2 {
         return;
     }
-    let mut s = Sampler::sobol(seed, Stream::Photon, pass, index);
+    let paths = scene.width() as u64 * scene.height() as u64;
+    let mut s = Sampler::across_passes(seed, Stream::Photon, pass, paths, index);
     let Some(mut walk) = Walk::from_light(scene, &mut s, 1.0) else {
         return;
     };
