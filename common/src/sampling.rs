@@ -275,6 +275,31 @@ impl Distribution1D {
 mod tests {
     use super::*;
 
+    /// The light paths of four even passes together put one direction (the first two numbers)
+    /// in every cell of each 2^-a × 2^-b grid of 4 × 256 cells: the passes fill each other's
+    /// gaps. The odd passes' sequence is another: their first paths differ.
+    #[test]
+    fn light_paths_of_even_passes_are_one_net() {
+        let (count, m) = (256u64, 10);
+        let first_two = |pass, i| {
+            let mut s = Sampler::across_passes(5, Stream::Photon, pass, count, i);
+            (s.next_1d(), s.next_1d())
+        };
+        for a in 0..=m {
+            let mut seen = vec![false; 1 << m];
+            for pass in [0, 2, 4, 6] {
+                for i in 0..count {
+                    let (x, y) = first_two(pass, i);
+                    let cell =
+                        ((x * (1 << a) as f32) as usize) << (m - a) | (y * (1 << (m - a)) as f32) as usize;
+                    assert!(!seen[cell], "{a}: two light paths in cell {cell}");
+                    seen[cell] = true;
+                }
+            }
+        }
+        assert_ne!(first_two(0, 0), first_two(1, 0));
+    }
+
     #[test]
     fn equiangular_distances_are_sampled_by_their_density() {
         // E[g(t) / pdf(t)] = ∫₀^T g: with g = 1 the segment's length, and with g = e^{−t} its
