@@ -274,7 +274,7 @@ fn light_path_passes(
                             light_share,
                             seed,
                             pass,
-                            i,
+                            (pixels, i),
                             &mut |at, l| out.add(scene, at, l),
                         );
                     }

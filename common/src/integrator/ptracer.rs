@@ -5,8 +5,9 @@
 //! a pixel at every diffuse bounce, where SPPM blurs them by its radius); like Mitsuba's, it
 //! renders nothing seen through glass or in a mirror, which a delta BSDF cannot connect to.
 //!
-//! Light path `index` of pass `pass` draws its numbers from (seed, pass, index), as a photon
-//! does, so any machine renders any pass and the farm's merge stays exact. Its settings are the
+//! Light path `index` of the `count` of pass `pass` draws its numbers from (seed, pass, count,
+//! index) alone ([`Sampler::across_passes`]), so any machine renders any pass and the farm's
+//! merge stays exact. Its settings are the
 //! path tracer's ([`PathSettings`]): `max_depth` counts from the camera as Mitsuba's does, and
 //! light paths end by the photons' roulette (survival by the bounce's albedo), so `rr_depth` is
 //! read and not used.
@@ -23,7 +24,7 @@ use crate::light::LightSample;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
-/// Traces light path `index` of pass `pass` and calls `splat(film position, value)` for every
+/// Traces light path `index` of the `count` of pass `pass` and calls `splat(film position, value)` for every
 /// connection to the camera. A pass of one light path per pixel, with the values added into the
 /// pixels they land on, gives per pixel its mean times the pass count (see
 /// [`crate::camera::Camera::connect`]); emitters seen directly are not included (the camera
@@ -35,15 +36,14 @@ pub fn trace_light_path(
     share: Share,
     seed: u64,
     pass: u64,
-    index: u64,
+    (count, index): (u64, u64),
     splat: &mut impl FnMut(Vec2, Rgb),
 ) {
     let max_depth = settings.max_depth.unwrap_or(u32::MAX);
     if scene.light_selection.is_empty() || max_depth < 2 {
         return;
     }
-    let paths = scene.width() as u64 * scene.height() as u64;
-    let mut s = Sampler::across_passes(seed, Stream::Photon, pass, paths, index);
+    let mut s = Sampler::across_passes(seed, Stream::Photon, pass, count, index);
     let Some(mut walk) = Walk::from_light(scene, &mut s, 1.0) else {
         return;
     };

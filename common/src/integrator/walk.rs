@@ -287,12 +287,12 @@ impl Walk {
         self.beta != Rgb::ZERO
     }
 
-    /// A light path leaving a light picked by power (five random numbers: the light, the
-    /// position, the direction), carrying its power over the pick's probability, in units of
+    /// A light path leaving a light picked by power (five random numbers: the direction, the
+    /// light, the position), carrying its power over the pick's probability, in units of
     /// `unit` (SPPM's total power, so stored photons are of order one; 1 for absolute power).
     pub fn from_light(scene: &Scene, sampler: &mut Sampler, unit: f32) -> Option<Walk> {
         // The direction first: a Sobol point's first two numbers are its best-stratified pair,
-        // and a point or spot light's photons differ in nothing else (docs/sampling.md).
+        // and the photons of one point or spot light differ in nothing else (docs/sampling.md).
         let u_dir = sampler.next_2d();
         let (light, pmf, _) = scene.light_selection.sample(sampler.next_1d());
         let u_pos = sampler.next_2d();
