@@ -30,10 +30,7 @@ pub struct Sampler {
 
 /// One point of a scrambled Sobol sequence, read one dimension at a time.
 struct SobolPoint {
-    /// Index in the sequence.
-    index: u32,
-    /// Which scramble: independent sequences for different keys.
-    scramble: u32,
+    point: crate::sobol::Point,
     /// Next dimension to hand out.
     dim: u32,
     /// Dimensions `dim & !3` to `(dim & !3) + 3`, computed four at a time.
@@ -83,8 +80,11 @@ impl Sampler {
         let block = sample / SOBOL_POINTS;
         let scramble = mix64(mix64(seed ^ mix64(stream as u64 + 16)) ^ key.rotate_left(29) ^ block);
         s.sobol = Some(SobolPoint {
-            index: (sample % SOBOL_POINTS) as u32,
-            scramble: (scramble >> 32) as u32 ^ scramble as u32,
+            // The scramble makes sequences of different keys independent.
+            point: crate::sobol::Point::new(
+                (sample % SOBOL_POINTS) as u32,
+                (scramble >> 32) as u32 ^ scramble as u32,
+            ),
             dim: 0,
             four: [0.0; 4],
         });
@@ -114,7 +114,7 @@ impl Sampler {
             && p.dim < SOBOL_DIMENSIONS
         {
             if p.dim % 4 == 0 {
-                p.four = crate::sobol::sample_4d(p.index, p.dim / 4, p.scramble);
+                p.four = p.point.four(p.dim / 4);
             }
             let x = p.four[(p.dim % 4) as usize];
             p.dim += 1;

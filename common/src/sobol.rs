@@ -52,20 +52,34 @@ fn sobol_rev(index: u32, set: u32) -> Int4 {
     sobol
 }
 
-/// Dimensions `4 * set` to `4 * set + 3` of point `index` of the sequence `seed`, in [0, 1).
-/// Any power-of-two run of indices starting at a multiple of its length is a scrambled net.
-///
-/// Panics if `set >= DIMENSION_SETS`.
-#[inline]
-pub fn sample_4d(index: u32, set: u32, seed: u32) -> [f32; 4] {
-    // Shuffling the index (an Owen scramble of its reversed bits) keeps aligned power-of-two
-    // runs together, so prefixes stay nets, and makes sequences of different seeds independent.
-    let shuffled = owen_scramble_rev(index.reverse_bits(), hash(seed ^ 0x79c6_8e4a)).reverse_bits();
-    let scramble = Int4::from([seed.wrapping_mul(0x9c8f_2d3b) ^ set; 4])
-        ^ Int4::from([0x912f_69ba, 0x174f_18ab, 0x691e_72ca, 0xb40c_c1b8]);
-    owen_scramble_int4_rev(sobol_rev(shuffled, set), hash_int4(scramble))
-        .reverse_bits()
-        .to_f32_norm()
+/// Point `index` of the sequence `seed`. Any power-of-two run of indices starting at a multiple
+/// of its length is a scrambled net.
+#[derive(Clone, Copy)]
+pub struct Point {
+    /// The index shuffled once for all the point's dimensions: an Owen scramble of its reversed
+    /// bits keeps aligned power-of-two runs together, so prefixes stay nets, and makes
+    /// sequences of different seeds independent.
+    shuffled: u32,
+    seed: u32,
+}
+
+impl Point {
+    /// Point `index` of the sequence `seed`.
+    #[inline]
+    pub fn new(index: u32, seed: u32) -> Point {
+        let shuffled = owen_scramble_rev(index.reverse_bits(), hash(seed ^ 0x79c6_8e4a)).reverse_bits();
+        Point { shuffled, seed }
+    }
+
+    /// Dimensions `4 * set` to `4 * set + 3`, in [0, 1). Panics if `set >= DIMENSION_SETS`.
+    #[inline]
+    pub fn four(&self, set: u32) -> [f32; 4] {
+        let scramble = Int4::from([self.seed.wrapping_mul(0x9c8f_2d3b) ^ set; 4])
+            ^ Int4::from([0x912f_69ba, 0x174f_18ab, 0x691e_72ca, 0xb40c_c1b8]);
+        owen_scramble_int4_rev(sobol_rev(self.shuffled, set), hash_int4(scramble))
+            .reverse_bits()
+            .to_f32_norm()
+    }
 }
 
 #[cfg(test)]
@@ -155,7 +169,7 @@ mod tests {
             for set in 0..DIMENSION_SETS {
                 let mut seen = vec![[false; 4]; 1 << m];
                 for i in start..start + (1 << m) {
-                    let p = sample_4d(i, set, 7);
+                    let p = Point::new(i, 7).four(set);
                     for d in 0..4 {
                         let cell = (p[d] * (1 << m) as f32) as usize;
                         assert!(!seen[cell][d], "set {set} dim {d}: two points in cell {cell}");
