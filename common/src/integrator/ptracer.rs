@@ -7,10 +7,9 @@
 //!
 //! Light path `index` of the `count` of pass `pass` draws its numbers from (seed, pass, count,
 //! index) alone ([`Sampler::across_passes`]), so any machine renders any pass and the farm's
-//! merge stays exact. Its settings are the
-//! path tracer's ([`PathSettings`]): `max_depth` counts from the camera as Mitsuba's does, and
-//! light paths end by the photons' roulette (survival by the bounce's albedo), so `rr_depth` is
-//! read and not used.
+//! merge stays exact. Its settings are the path tracer's ([`PathSettings`]): `max_depth` counts
+//! from the camera as Mitsuba's does, and light paths end by the photons' roulette (survival by
+//! the bounce's albedo), so `rr_depth` is read and not used.
 
 use glam::{Vec2, Vec3A};
 
@@ -24,9 +23,9 @@ use crate::light::LightSample;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
-/// Traces light path `index` of the `count` of pass `pass` and calls `splat(film position, value)` for every
-/// connection to the camera. A pass of one light path per pixel, with the values added into the
-/// pixels they land on, gives per pixel its mean times the pass count (see
+/// Traces light path `index` of the `count` of pass `pass` and calls `splat(film position,
+/// value)` for every connection to the camera. A pass of one light path per pixel, with the
+/// values added into the pixels they land on, gives per pixel its mean times the pass count (see
 /// [`crate::camera::Camera::connect`]); emitters seen directly are not included (the camera
 /// finds those). Only the paths of `share` count: [`Share::All`], or the hybrid's caustics
 /// ([`Share::LightSide`]).
