@@ -225,9 +225,9 @@ impl BinaryTree for Binary<'_> {
         self.0[i as usize].bounds
     }
 
-    fn leaf(&self, i: u32) -> Option<(u32, u32)> {
+    fn leaf(&self, i: u32) -> Option<(u32, u16)> {
         let n = &self.0[i as usize];
-        (n.count > 0).then_some((n.offset, n.count as u32))
+        (n.count > 0).then_some((n.offset, n.count))
     }
 
     fn children(&self, i: u32) -> [u32; 2] {
