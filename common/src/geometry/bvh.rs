@@ -161,7 +161,7 @@ impl Bvh {
             Accel::Own(nodes) => {
                 let mut best: Option<Hit> = None;
                 let mut t_max = t_max;
-                self.traverse(nodes, ray, &mut t_max, |prim, t, b1, b2| {
+                self.traverse::<true>(nodes, ray, &mut t_max, |prim, t, b1, b2| {
                     best = Some(Hit { t, prim, b1, b2 });
                     false
                 });
@@ -181,7 +181,7 @@ impl Bvh {
             Accel::Own(nodes) => {
                 let mut found = false;
                 let mut t_max = t_max;
-                self.traverse(nodes, ray, &mut t_max, |_, _, _, _| {
+                self.traverse::<false>(nodes, ray, &mut t_max, |_, _, _, _| {
                     found = true;
                     true
                 });
@@ -194,16 +194,16 @@ impl Bvh {
         }
     }
 
-    /// Front-to-back traversal; `on_hit` returns true to stop.
+    /// Traversal, front to back if `NEAREST_FIRST`; `on_hit` returns true to stop.
     #[inline]
-    fn traverse(
+    fn traverse<const NEAREST_FIRST: bool>(
         &self,
         nodes: &[WideNode],
         ray: &Ray,
         t_max: &mut f32,
         mut on_hit: impl FnMut(u32, f32, f32, f32) -> bool,
     ) {
-        bvh4::traverse(nodes, ray, t_max, |first, count, t_max| {
+        bvh4::traverse::<NEAREST_FIRST>(nodes, ray, t_max, |first, count, t_max| {
             for i in first as usize..(first + count) as usize {
                 if let Some((t, b1, b2)) = self.prims[i].intersect(ray, *t_max) {
                     *t_max = t;
