@@ -12,32 +12,61 @@ use crate::integrator::sppm::{SppmError, SppmSettings, VolumeEstimate};
 use crate::render::{Method, RenderSettings};
 use crate::scene::Scene;
 
-/// The rendering method.
+/// The rendering method. Its names (the job API's JSON, `--integrator`, the logs) are the
+/// variants' own, lowercased, by serde and clap alike; [`Integrator::name`] spells them for the
+/// rest, and a test holds the three together. (The variants' doc comments are `--help`'s.)
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Integrator {
-    /// Path tracing.
+    /// Unidirectional path tracing with next-event estimation and MIS.
     Path,
-    /// Mitsuba's `direct`: emission and one bounce of light.
+    /// Mitsuba's `direct`: emitters seen directly and one bounce of light, nothing more.
     Direct,
-    /// Progressive photon mapping.
+    /// Stochastic progressive photon mapping (Knaus and Zwicker): caustics and light seen
+    /// through glass or in mirrors.
     Sppm,
-    /// Mitsuba's particle tracer.
+    /// Mitsuba's particle tracer: light paths connected to the camera at every diffuse
+    /// bounce; caustics on what the camera sees directly, nothing seen through glass or in
+    /// mirrors.
     Ptracer,
-    /// Path tracing for all light but caustics, particle tracing for caustics.
+    /// The path tracer for all light but caustics, and the particle tracer for caustics
+    /// (light whose first bounce off the light is specular, landing on something the camera
+    /// sees directly): caustics of point and spot lights at the particle tracer's speed, the
+    /// rest at the path tracer's.
     Hybrid,
 }
 
 impl Integrator {
+    /// Every method.
+    pub const ALL: [Integrator; 5] = [
+        Integrator::Path,
+        Integrator::Direct,
+        Integrator::Sppm,
+        Integrator::Ptracer,
+        Integrator::Hybrid,
+    ];
+
+    /// The method's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::Path => "path",
+            Integrator::Direct => "direct",
+            Integrator::Sppm => "sppm",
+            Integrator::Ptracer => "ptracer",
+            Integrator::Hybrid => "hybrid",
+        }
+    }
+
+    /// The method named `name`.
+    pub fn from_name(name: &str) -> Option<Integrator> {
+        Integrator::ALL.into_iter().find(|i| i.name() == name)
+    }
+
     /// The method that renders a scene's `<integrator>` (already reduced by the scene loader
     /// to `path`, `direct`, `sppm` or `ptracer`).
     pub fn of_scene(scene: &Scene) -> Integrator {
-        match scene.integrator.kind.as_str() {
-            "direct" => Integrator::Direct,
-            "sppm" => Integrator::Sppm,
-            "ptracer" => Integrator::Ptracer,
-            _ => Integrator::Path,
-        }
+        Integrator::from_name(&scene.integrator.kind).unwrap_or(Integrator::Path)
     }
 }
 
@@ -247,6 +276,21 @@ mod tests {
             </scene>"#
         );
         Scene::from_str(&text, Path::new("t.xml"), &[]).unwrap()
+    }
+
+    /// One spelling of each method: `name`, the job API's JSON and `--integrator`.
+    #[test]
+    fn methods_have_one_name_each() {
+        for i in Integrator::ALL {
+            assert_eq!(serde_json::to_string(&i).unwrap(), format!("\"{}\"", i.name()));
+            assert_eq!(Integrator::from_name(i.name()), Some(i));
+            #[cfg(feature = "cli")]
+            assert_eq!(
+                clap::ValueEnum::to_possible_value(&i).unwrap().get_name(),
+                i.name()
+            );
+        }
+        assert_eq!(Integrator::from_name("volpath"), None);
     }
 
     #[test]

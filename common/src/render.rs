@@ -19,6 +19,7 @@ use crate::integrator::sppm::{
     VolumeMap,
 };
 use crate::integrator::{Share, ptracer};
+use crate::job::Integrator;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -44,15 +45,20 @@ pub enum Method {
 }
 
 impl Method {
+    /// Which method this is.
+    pub fn integrator(&self) -> Integrator {
+        match self {
+            Method::Path(_) => Integrator::Path,
+            Method::Direct(_) => Integrator::Direct,
+            Method::Sppm(_) => Integrator::Sppm,
+            Method::Ptracer(_) => Integrator::Ptracer,
+            Method::Hybrid(_) => Integrator::Hybrid,
+        }
+    }
+
     /// The method's name, as `--integrator` and the job API spell it.
     pub fn name(&self) -> &'static str {
-        match self {
-            Method::Path(_) => "path",
-            Method::Direct(_) => "direct",
-            Method::Sppm(_) => "sppm",
-            Method::Ptracer(_) => "ptracer",
-            Method::Hybrid(_) => "hybrid",
-        }
+        self.integrator().name()
     }
 }
 

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 use photonfarm::integrator::sppm::VolumeEstimate;
 use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
 
@@ -189,49 +189,6 @@ pub struct ConvergeArgs {
     pub define: Vec<(String, String)>,
 }
 
-/// The rendering method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum Integrator {
-    /// Unidirectional path tracing with next-event estimation and MIS.
-    Path,
-    /// Mitsuba's `direct`: emitters seen directly and one bounce of light, nothing more.
-    Direct,
-    /// Stochastic progressive photon mapping (Knaus and Zwicker): caustics and light seen
-    /// through glass or in mirrors.
-    Sppm,
-    /// Mitsuba's particle tracer: light paths connected to the camera at every diffuse
-    /// bounce; caustics on what the camera sees directly, nothing seen through glass or in
-    /// mirrors.
-    Ptracer,
-    /// The path tracer for all light but caustics, and the particle tracer for caustics
-    /// (light whose first bounce off the light is specular, landing on something the camera
-    /// sees directly): caustics of point and spot lights at the particle tracer's speed, the
-    /// rest at the path tracer's.
-    Hybrid,
-}
-
-/// SPPM's volume estimator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum VolumeEstimateArg {
-    /// Every photon sphere along the camera ray (the beam radiance estimate).
-    Beam,
-    /// The photons around one sampled collision.
-    Point,
-    /// Every photon flight passing the camera ray (photon beams).
-    PhotonBeams,
-}
-
-impl VolumeEstimateArg {
-    /// The renderer's setting.
-    pub fn estimate(self) -> VolumeEstimate {
-        match self {
-            VolumeEstimateArg::Beam => VolumeEstimate::Beam,
-            VolumeEstimateArg::Point => VolumeEstimate::Point,
-            VolumeEstimateArg::PhotonBeams => VolumeEstimate::PhotonBeams,
-        }
-    }
-}
-
 /// What to render: shared by `render` and `submit`.
 #[derive(Debug, clap::Args)]
 pub struct JobArgs {
@@ -240,7 +197,7 @@ pub struct JobArgs {
     /// Rendering method [default: the scene's <integrator>: path and volpath render with
     /// path, direct with direct, sppm with sppm, ptracer with ptracer; path if it has none].
     #[arg(long, value_enum)]
-    pub integrator: Option<Integrator>,
+    pub integrator: Option<JobIntegrator>,
     /// Path tracing, direct, ptracer and hybrid: samples (light paths for ptracer) per pixel
     /// (passes). Default: the scene's sampler sample_count (`render`: no limit when
     /// --time-limit is given).
@@ -276,7 +233,7 @@ pub struct JobArgs {
     /// collision, or `photon-beams` from photon flights passing the camera ray [default: beam].
     /// See docs/volumes.md.
     #[arg(long, value_enum)]
-    pub volume_estimate: Option<VolumeEstimateArg>,
+    pub volume_estimate: Option<VolumeEstimate>,
     /// Seed of every random number: the same seed gives the same image bytes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -292,13 +249,7 @@ pub struct JobArgs {
 impl JobArgs {
     /// The settings these flags ask for.
     pub fn settings(&self) -> anyhow::Result<JobSettings> {
-        let integrator = self.integrator.map(|i| match i {
-            Integrator::Path => JobIntegrator::Path,
-            Integrator::Direct => JobIntegrator::Direct,
-            Integrator::Sppm => JobIntegrator::Sppm,
-            Integrator::Ptracer => JobIntegrator::Ptracer,
-            Integrator::Hybrid => JobIntegrator::Hybrid,
-        });
+        let integrator = self.integrator;
         let passes = match (integrator, self.spp, self.iterations) {
             (_, Some(_), Some(_)) => {
                 anyhow::bail!("give --spp (path, direct, ptracer, hybrid) or --iterations (sppm), not both")
@@ -334,7 +285,7 @@ impl JobArgs {
             alpha: self.alpha,
             k: self.k,
             volume_radius_ratio: self.volume_radius_ratio,
-            volume_estimate: self.volume_estimate.map(VolumeEstimateArg::estimate),
+            volume_estimate: self.volume_estimate,
             defines: self.define.clone(),
             seed: self.seed,
             checkpoint_every: self.checkpoint_every,

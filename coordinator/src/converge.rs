@@ -8,6 +8,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use clap::ValueEnum;
 use photonfarm::color::Rgb;
 use photonfarm::film::{FilmSum, read_image};
 use photonfarm::integrator::sppm::VolumeEstimate;
@@ -131,67 +132,81 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
     };
     let mut lines = Vec::new();
     for m in args.methods.split(',').map(str::trim) {
-        match m {
+        // A method by its name, or SPPM with a volume estimate: `sppm-` and the estimate's name.
+        let parsed = match m.strip_prefix("sppm-") {
+            Some(estimate) => VolumeEstimate::from_str(estimate, false)
+                .ok()
+                .map(|e| (JobIntegrator::Sppm, Some(e))),
+            None => JobIntegrator::from_name(m).map(|i| (i, None)),
+        };
+        let Some((integrator, volume_estimate)) = parsed.filter(|(i, _)| *i != JobIntegrator::Direct) else {
+            bail!(
+                "unknown method \"{m}\" in --methods ({})",
+                converge_methods().join(", ")
+            );
+        };
+        if integrator != JobIntegrator::Sppm {
             // SPPM's settings do not apply to the path tracer's, particle tracer's or hybrid's line.
-            "path" | "ptracer" | "hybrid" => lines.push((
+            lines.push((
                 m.to_string(),
                 JobSettings {
-                    integrator: Some(match m {
-                        "path" => JobIntegrator::Path,
-                        "ptracer" => JobIntegrator::Ptracer,
-                        _ => JobIntegrator::Hybrid,
-                    }),
+                    integrator: Some(integrator),
                     photons: None,
                     k: None,
                     volume_radius_ratio: None,
                     ..base.clone()
                 },
-            )),
-            "sppm" | "sppm-beam" | "sppm-point" | "sppm-photon-beams" => {
-                let volume_estimate = match m {
-                    "sppm-beam" => Some(VolumeEstimate::Beam),
-                    "sppm-point" => Some(VolumeEstimate::Point),
-                    "sppm-photon-beams" => Some(VolumeEstimate::PhotonBeams),
-                    _ => None,
-                };
-                let alphas: Vec<Option<f64>> = if args.alpha.is_empty() {
-                    vec![None]
-                } else {
-                    args.alpha.iter().map(|a| Some(*a)).collect()
-                };
-                let radii: Vec<Option<f32>> = if args.radius.is_empty() {
-                    vec![None]
-                } else {
-                    args.radius.iter().map(|r| Some(*r)).collect()
-                };
-                for alpha in &alphas {
-                    for radius in &radii {
-                        let mut name = m.to_string();
-                        if alphas.len() > 1 {
-                            name.push_str(&format!(" alpha={}", alpha.unwrap_or_default()));
-                        }
-                        if radii.len() > 1 {
-                            name.push_str(&format!(" radius={}", radius.unwrap_or_default()));
-                        }
-                        lines.push((
-                            name,
-                            JobSettings {
-                                integrator: Some(JobIntegrator::Sppm),
-                                alpha: *alpha,
-                                radius: *radius,
-                                volume_estimate,
-                                ..base.clone()
-                            },
-                        ));
-                    }
+            ));
+            continue;
+        }
+        let alphas: Vec<Option<f64>> = if args.alpha.is_empty() {
+            vec![None]
+        } else {
+            args.alpha.iter().map(|a| Some(*a)).collect()
+        };
+        let radii: Vec<Option<f32>> = if args.radius.is_empty() {
+            vec![None]
+        } else {
+            args.radius.iter().map(|r| Some(*r)).collect()
+        };
+        for alpha in &alphas {
+            for radius in &radii {
+                let mut name = m.to_string();
+                if alphas.len() > 1 {
+                    name.push_str(&format!(" alpha={}", alpha.unwrap_or_default()));
                 }
+                if radii.len() > 1 {
+                    name.push_str(&format!(" radius={}", radius.unwrap_or_default()));
+                }
+                lines.push((
+                    name,
+                    JobSettings {
+                        integrator: Some(JobIntegrator::Sppm),
+                        alpha: *alpha,
+                        radius: *radius,
+                        volume_estimate,
+                        ..base.clone()
+                    },
+                ));
             }
-            other => bail!(
-                "unknown method \"{other}\" in --methods (path, ptracer, hybrid, sppm, sppm-beam, sppm-point, sppm-photon-beams)"
-            ),
         }
     }
     Ok(lines)
+}
+
+/// The names `--methods` takes: every method but `direct` (which leaves out most light), and
+/// SPPM with each volume estimate.
+fn converge_methods() -> Vec<String> {
+    let methods = JobIntegrator::ALL
+        .into_iter()
+        .filter(|i| *i != JobIntegrator::Direct);
+    let estimates = VolumeEstimate::value_variants()
+        .iter()
+        .filter_map(|e| e.to_possible_value());
+    methods
+        .map(|i| i.name().to_string())
+        .chain(estimates.map(|e| format!("sppm-{}", e.get_name())))
+        .collect()
 }
 
 /// Renders until the budget is spent, measuring at √2-spaced moments of render time.

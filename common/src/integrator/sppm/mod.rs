@@ -26,7 +26,11 @@ pub use trace::{PhotonBuffers, VolumeRecord, power_unit, trace_photons};
 use crate::scene::Scene;
 
 /// How the camera pass estimates light scattered in media from the volume photons.
+///
+/// (The variants' doc comments are `--volume-estimate`'s help; clap names them as serde does,
+/// `photon-beams` included, which a test holds.)
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum VolumeEstimate {
     /// Jarosz et al.'s beam radiance estimate: every photon sphere the camera ray crosses
@@ -295,6 +299,14 @@ mod tests {
         ] {
             assert_eq!(serde_json::from_str::<VolumeEstimate>(name).unwrap(), estimate);
             assert_eq!(serde_json::to_string(&estimate).unwrap(), name);
+            #[cfg(feature = "cli")]
+            assert_eq!(
+                format!(
+                    "\"{}\"",
+                    clap::ValueEnum::to_possible_value(&estimate).unwrap().get_name()
+                ),
+                name
+            );
         }
     }
 }
