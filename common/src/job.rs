@@ -222,7 +222,7 @@ impl JobSettings {
                 s.alpha = self.alpha.unwrap_or(s.alpha);
                 s.k = self.k.unwrap_or(s.k);
                 if let Some(e) = self.volume_estimate {
-                    let declared = scene.integrator.kind == "sppm"
+                    let declared = Integrator::of_scene(scene) == Integrator::Sppm
                         && scene
                             .integrator
                             .params

@@ -139,7 +139,7 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
                 .map(|e| (JobIntegrator::Sppm, Some(e))),
             None => JobIntegrator::from_name(m).map(|i| (i, None)),
         };
-        let Some((integrator, volume_estimate)) = parsed.filter(|(i, _)| *i != JobIntegrator::Direct) else {
+        let Some((integrator, volume_estimate)) = parsed.filter(|(i, _)| converges(*i)) else {
             bail!(
                 "unknown method \"{m}\" in --methods ({})",
                 converge_methods().join(", ")
@@ -194,12 +194,15 @@ fn plan_lines(args: &ConvergeArgs) -> anyhow::Result<Vec<(String, JobSettings)>>
     Ok(lines)
 }
 
-/// The names `--methods` takes: every method but `direct` (which leaves out most light), and
-/// SPPM with each volume estimate.
+/// Whether `--methods` takes a method: all but `direct`, which leaves out most light and so
+/// converges to another image.
+fn converges(i: JobIntegrator) -> bool {
+    i != JobIntegrator::Direct
+}
+
+/// The names `--methods` takes: the methods that converge, and SPPM with each volume estimate.
 fn converge_methods() -> Vec<String> {
-    let methods = JobIntegrator::ALL
-        .into_iter()
-        .filter(|i| *i != JobIntegrator::Direct);
+    let methods = JobIntegrator::ALL.into_iter().filter(|i| converges(*i));
     let estimates = VolumeEstimate::value_variants()
         .iter()
         .filter_map(|e| e.to_possible_value());
@@ -408,6 +411,50 @@ pub fn tick_label(v: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser;
+
+    /// `coordinator converge s.xml --reference r.exr --methods METHODS`'s lines.
+    fn plan(methods: &str) -> anyhow::Result<Vec<(String, JobSettings)>> {
+        let argv = [
+            "coordinator",
+            "converge",
+            "s.xml",
+            "--reference",
+            "r.exr",
+            "--methods",
+            methods,
+        ];
+        let crate::cli::Command::Converge(args) = crate::cli::Cli::try_parse_from(argv)?.command else {
+            panic!("not converge")
+        };
+        plan_lines(&args)
+    }
+
+    /// Every name the error message offers is taken, as the method it names.
+    #[test]
+    fn every_listed_method_is_taken() {
+        for name in converge_methods() {
+            let lines = plan(&name).unwrap();
+            assert_eq!(lines.len(), 1, "{name}");
+            let settings = &lines[0].1;
+            let estimate = name
+                .strip_prefix("sppm-")
+                .map(|e| VolumeEstimate::from_str(e, false).unwrap());
+            let method = if estimate.is_some() { "sppm" } else { name.as_str() };
+            assert_eq!(
+                settings.integrator.map(JobIntegrator::name),
+                Some(method),
+                "{name}"
+            );
+            assert_eq!(settings.volume_estimate, estimate, "{name}");
+        }
+        for bad in ["direct", "sppm-points", "bdpt"] {
+            assert!(
+                plan(bad).unwrap_err().to_string().contains("unknown method"),
+                "{bad}"
+            );
+        }
+    }
 
     #[test]
     fn log_ticks_are_distinct_and_label_distinctly() {

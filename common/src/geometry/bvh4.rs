@@ -128,8 +128,8 @@ pub(super) fn collapse(tree: &impl BinaryTree) -> Vec<WideNode> {
 /// Traversal of `nodes`: `test(first, count, t_max)` tests a leaf's primitives, shrinking
 /// `t_max` to any hit, and returns true to stop. `NEAREST_FIRST` visits a node's children front
 /// to back, which the closest hit needs; a query for any hit (a shadow ray) skips the sorting,
-/// as its answer does not depend on the order (on the 131k-triangle mesh its rays went 25%
-/// faster).
+/// as its answer does not depend on the order (docs/benchmarks.md, "Traversal order", has
+/// what that gained).
 #[inline]
 pub(super) fn traverse<const NEAREST_FIRST: bool>(
     nodes: &[WideNode],
@@ -172,7 +172,8 @@ pub(super) fn traverse<const NEAREST_FIRST: bool>(
                 cur = entry(hit.trailing_zeros() as usize);
                 continue;
             }
-            // Push the hit children far to near, so that the nearest is tested first.
+            // Push the hit children (far to near if `NEAREST_FIRST`, so that the nearest is
+            // tested first).
             let base = stack.len();
             while hit != 0 {
                 let lane = hit.trailing_zeros() as usize;
@@ -185,7 +186,8 @@ pub(super) fn traverse<const NEAREST_FIRST: bool>(
                 }
             }
         }
-        // Next: the nearest entry left that is not beyond a hit found since it was pushed.
+        // Next: the top entry (the nearest left, if `NEAREST_FIRST`) that is not beyond a hit
+        // found since it was pushed.
         loop {
             let Some(e) = stack.pop() else { return };
             if e.t > *t_max {
