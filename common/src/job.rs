@@ -62,12 +62,6 @@ impl Integrator {
     pub fn from_name(name: &str) -> Option<Integrator> {
         Integrator::ALL.into_iter().find(|i| i.name() == name)
     }
-
-    /// The method that renders a scene's `<integrator>` (already reduced by the scene loader
-    /// to `path`, `direct`, `sppm` or `ptracer`).
-    pub fn of_scene(scene: &Scene) -> Integrator {
-        Integrator::from_name(&scene.integrator.kind).unwrap_or(Integrator::Path)
-    }
 }
 
 /// What a user asks for. Unset values take the scene's, then the built-in defaults.
@@ -191,7 +185,7 @@ impl JobSettings {
         }
         self.check_defines()?;
         let mut warnings = Vec::new();
-        let integrator = self.integrator.unwrap_or_else(|| Integrator::of_scene(scene));
+        let integrator = self.integrator.unwrap_or(scene.integrator.kind);
         let (method, declared) = match integrator {
             Integrator::Path | Integrator::Direct | Integrator::Ptracer | Integrator::Hybrid => {
                 for (name, given) in [
@@ -222,7 +216,7 @@ impl JobSettings {
                 s.alpha = self.alpha.unwrap_or(s.alpha);
                 s.k = self.k.unwrap_or(s.k);
                 if let Some(e) = self.volume_estimate {
-                    let declared = Integrator::of_scene(scene) == Integrator::Sppm
+                    let declared = scene.integrator.kind == Integrator::Sppm
                         && scene
                             .integrator
                             .params

@@ -20,6 +20,7 @@ use crate::color::Rgb;
 use crate::filter::Filter;
 use crate::geometry::Frame;
 use crate::geometry::{Bvh, Primitive, Sphere, Triangle};
+use crate::job::Integrator;
 use crate::light::{
     AreaLight, BeamLight, ConstantLight, DirectionalLight, EnvmapLight, Light, PointLight, SceneSphere,
     SpotLight,
@@ -222,7 +223,7 @@ impl<'a> Builder<'a> {
             }
         }
         let integrator = integrator.unwrap_or(IntegratorDecl {
-            kind: "path".into(),
+            kind: Integrator::Path,
             max_depth: -1,
             rr_depth: 5,
             params: Vec::new(),
@@ -339,15 +340,15 @@ impl<'a> Builder<'a> {
                 "{}:{}: <integrator type=\"{kind}\">: rendering its nested {} integrator; the {kind} outputs are not written",
                 el.file.display(),
                 el.line,
-                decl.kind
+                decl.kind.name()
             ));
             return Ok(decl);
         }
         let method = match kind {
-            "path" | "volpath" | "volpathmis" => "path",
-            "ptracer" => "ptracer",
-            "direct" => "direct",
-            "sppm" => "sppm",
+            "path" | "volpath" | "volpathmis" => Integrator::Path,
+            "ptracer" => Integrator::Ptracer,
+            "direct" => Integrator::Direct,
+            "sppm" => Integrator::Sppm,
             other => {
                 return Err(self.ctx.err(
                     el,
@@ -386,7 +387,7 @@ impl<'a> Builder<'a> {
         }
         let mut params = Vec::new();
         match method {
-            "direct" => {
+            Integrator::Direct => {
                 let shading = p.int("shading_samples")?;
                 let (e, b) = (p.int("emitter_samples")?, p.int("bsdf_samples")?);
                 if shading.is_some() && (e.is_some() || b.is_some()) {
@@ -411,7 +412,7 @@ impl<'a> Builder<'a> {
                 params.push(("bsdf_samples".to_string(), b as f64));
             }
             // The remaining numbers are SPPM's (photon count, radius, ...).
-            "sppm" => {
+            Integrator::Sppm => {
                 for c in &el.children {
                     if let (Some(name), "float" | "integer") = (c.attr("name"), c.tag.as_str())
                         && !matches!(name, "max_depth" | "rr_depth" | "samples_per_pass" | "block_size")
@@ -425,7 +426,7 @@ impl<'a> Builder<'a> {
         }
         p.finish()?;
         Ok(IntegratorDecl {
-            kind: method.to_string(),
+            kind: method,
             max_depth: max_depth as i32,
             rr_depth: rr_depth as u32,
             params,

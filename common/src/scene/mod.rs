@@ -61,8 +61,8 @@ impl ShapeInfo {
 /// are read here.
 #[derive(Clone, Debug)]
 pub struct IntegratorDecl {
-    /// The declared type (`path`, `sppm`, ...).
-    pub kind: String,
+    /// The method of ours that renders the declared type (`volpath` renders with `path`).
+    pub kind: crate::job::Integrator,
     /// Longest path, in Mitsuba's meaning (1: emitters seen directly; -1: unlimited).
     pub max_depth: i32,
     /// Depth from which Russian roulette may end paths.

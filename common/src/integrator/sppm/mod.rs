@@ -161,7 +161,7 @@ impl SppmSettings {
             rr_depth: decl.rr_depth,
         };
         let mut warnings = Vec::new();
-        if crate::job::Integrator::from_name(&decl.kind) == Some(crate::job::Integrator::Sppm) {
+        if decl.kind == crate::job::Integrator::Sppm {
             for (name, v) in &decl.params {
                 match name.as_str() {
                     "photon_count" => s.photons = *v as u64,
