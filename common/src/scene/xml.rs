@@ -156,7 +156,7 @@ impl Reader {
             message,
         })?;
         let ctx = FileCtx {
-            doc: &doc,
+            lines: Lines::of(text),
             src,
             depth,
         };
@@ -307,6 +307,35 @@ impl Reader {
     }
 }
 
+/// Where a file's lines start, so that every element's line number is a binary search.
+///
+/// Why: roxmltree's `text_pos_at` counts newlines from the start of the file on every call
+/// (its docs: "use only for errors"), which made loading quadratic in the file's size: 100k
+/// spheres, 13 MB, took 298 s, 98% of it there (docs/benchmarks.md, "Scene loading").
+struct Lines {
+    /// Byte offsets of the file's newlines, in order.
+    newlines: Vec<usize>,
+}
+
+impl Lines {
+    fn of(text: &str) -> Lines {
+        Lines {
+            newlines: text
+                .bytes()
+                .enumerate()
+                .filter(|&(_, b)| b == b'\n')
+                .map(|(i, _)| i)
+                .collect(),
+        }
+    }
+
+    /// The 1-based line of byte offset `pos`, as roxmltree counts it: one more than the
+    /// newlines before it.
+    fn row(&self, pos: usize) -> u32 {
+        (self.newlines.partition_point(|&nl| nl < pos) + 1) as u32
+    }
+}
+
 /// Refuses nesting deeper than [`MAX_DEPTH`] in one file, without recursion (so before anything
 /// recurses); returns the line and message. Includes add their depth to the including
 /// element's, which [`MAX_INCLUDE_DEPTH`] bounds.
@@ -331,15 +360,15 @@ fn check_depth(doc: &roxmltree::Document) -> Result<(), (u32, String)> {
 }
 
 /// The file being read, for errors and relative paths.
-struct FileCtx<'d, 'i> {
-    doc: &'d roxmltree::Document<'i>,
+struct FileCtx {
+    lines: Lines,
     src: Arc<PathBuf>,
     depth: u32,
 }
 
-impl FileCtx<'_, '_> {
+impl FileCtx {
     fn line(&self, n: roxmltree::Node) -> u32 {
-        self.doc.text_pos_at(n.range().start).row
+        self.lines.row(n.range().start)
     }
 
     fn err(&self, n: roxmltree::Node, message: String) -> SceneError {
@@ -497,5 +526,15 @@ mod tests {
         .err()
         .unwrap();
         assert_eq!(e.line, 3, "{e}");
+    }
+
+    #[test]
+    fn line_numbers_are_roxmltrees_at_every_offset() {
+        let text = "<scene version=\"3.0.0\">\n\n  <a/>\r\n<b>\n</b>\n</scene>\n";
+        let doc = roxmltree::Document::parse(text).unwrap();
+        let lines = Lines::of(text);
+        for pos in 0..=text.len() {
+            assert_eq!(lines.row(pos), doc.text_pos_at(pos).row, "offset {pos}");
+        }
     }
 }
