@@ -3,6 +3,7 @@
 //! `<include>` splices in another file (its `<scene>` children, or its one object), `<path>`
 //! adds a folder to search for files, and a `-D` parameter that nothing uses is an error.
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -117,7 +118,8 @@ impl Reader {
     /// Reads one file: the main scene (`main`, returns its root) or an included file (returns
     /// the elements it contributes).
     fn file(&mut self, file: &Path, text: &str, depth: u32, main: bool) -> Result<Vec<Element>, SceneError> {
-        let doc = roxmltree::Document::parse(text).map_err(|e| SceneError {
+        let text = lenient_comments(text);
+        let doc = roxmltree::Document::parse(&text).map_err(|e| SceneError {
             file: file.to_path_buf(),
             line: e.pos().row,
             element: "XML".into(),
@@ -156,7 +158,7 @@ impl Reader {
             message,
         })?;
         let ctx = FileCtx {
-            lines: Lines::of(text),
+            lines: Lines::of(&text),
             src,
             depth,
         };
@@ -333,6 +335,42 @@ impl Lines {
     /// newlines before it.
     fn row(&self, pos: usize) -> u32 {
         (self.newlines.partition_point(|&nl| nl < pos) + 1) as u32
+    }
+}
+
+/// The text with every `-` inside an XML comment made a space, so that comments Mitsuba's
+/// parser (pugixml) reads, such as `<!-- a -- b -->` or `<!-- x --->`, are read here too:
+/// XML forbids `--` in a comment and roxmltree holds to it. A comment ends at its first `-->`,
+/// as in pugixml; CDATA sections are left alone. Byte offsets do not move, so line numbers
+/// stay those of the file as written.
+fn lenient_comments(text: &str) -> Cow<'_, str> {
+    let mut bytes: Option<Vec<u8>> = None;
+    let src = text.as_bytes();
+    let mut i = 0;
+    while let Some(at) = text[i..].find('<').map(|k| i + k) {
+        let rest = &text[at..];
+        if let Some(body) = rest.strip_prefix("<!--") {
+            let start = at + 4;
+            let end = body.find("-->").map_or(src.len(), |k| start + k);
+            if src[start..end].contains(&b'-') {
+                let out = bytes.get_or_insert_with(|| src.to_vec());
+                for b in &mut out[start..end] {
+                    if *b == b'-' {
+                        *b = b' ';
+                    }
+                }
+            }
+            i = (end + 3).min(src.len());
+        } else if rest.starts_with("<![CDATA[") {
+            i = rest.find("]]>").map_or(src.len(), |k| at + k + 3);
+        } else {
+            i = at + 1;
+        }
+    }
+    match bytes {
+        // Only ASCII '-' bytes were replaced by ASCII spaces, so the text is still UTF-8.
+        Some(b) => Cow::Owned(String::from_utf8(b).expect("ASCII replaced by ASCII")),
+        None => Cow::Borrowed(text),
     }
 }
 
@@ -536,5 +574,30 @@ mod tests {
         for pos in 0..=text.len() {
             assert_eq!(lines.row(pos), doc.text_pos_at(pos).row, "offset {pos}");
         }
+    }
+
+    #[test]
+    fn comments_with_double_dashes_are_read_as_mitsuba_reads_them() {
+        // pugixml (Mitsuba's parser) takes these; the XML specification and roxmltree do not.
+        let text = "<scene version=\"3.0.0\">\n<!-- exported -- by a tool --->\n<!---- rule ---->\n<film width=\"3--\"/>\n</scene>";
+        assert!(roxmltree::Document::parse(text).is_err());
+        let root = parse(Path::new("t.xml"), text, &[]).unwrap().root;
+        let film = &root.children[0];
+        // Dashes outside comments (an attribute, CDATA) are kept, and lines do not move.
+        assert_eq!(film.attr("width"), Some("3--"));
+        assert_eq!(film.line, 4);
+        assert_eq!(
+            lenient_comments("<a><![CDATA[<!-- -- ]]></a>"),
+            "<a><![CDATA[<!-- -- ]]></a>"
+        );
+        // A comment that never ends is still an error, on the comment's line.
+        let e = parse(
+            Path::new("t.xml"),
+            "<scene version=\"3.0.0\">\n<!-- -- \n</scene>",
+            &[],
+        )
+        .err()
+        .unwrap();
+        assert!(e.to_string().contains("malformed XML"), "{e}");
     }
 }
