@@ -223,7 +223,13 @@ pub struct Farm {
     key_source: std::collections::hash_map::RandomState,
     /// The workers seen lately.
     roster: Roster,
+    /// Each job's state, first unissued pass and message as last written to the store, so
+    /// that [`Farm::save_changes`] finds what the scheduler changed.
+    saved: HashMap<u64, Saved>,
 }
+
+/// What of a job's scheduling the store keeps: (state, first unissued pass, message).
+type Saved = (JobState, u64, Option<String>);
 
 fn unix_ms() -> u64 {
     SystemTime::now()
@@ -247,6 +253,7 @@ impl Farm {
         let first_lease = store.reserve_lease_ids()?;
         let mut scheduler = Scheduler::new(config.scheduler, first_lease);
         let mut jobs = BTreeMap::new();
+        let mut saved = HashMap::new();
         for row in store.load_jobs()? {
             let id = row.id;
             match restore(&mut store, &row, &config.limits) {
@@ -256,6 +263,14 @@ impl Farm {
                     }
                     scheduler.add_job(id, row.total, row.window, r.next_start, &r.done, r.state);
                     scheduler.set_pixels(id, row.width as u64 * row.height as u64);
+                    // A failed job keeps its failure's message across restarts.
+                    if r.state == JobState::Failed
+                        && let Some(message) = row.message.clone()
+                    {
+                        scheduler.set_failed(id, message);
+                    }
+                    let message = (r.state == row.state).then(|| row.message.clone()).flatten();
+                    saved.insert(id, (r.state, row.next_start, message));
                     jobs.insert(id, r.entry);
                 }
                 Err(message) => {
@@ -263,7 +278,8 @@ impl Farm {
                     let message = format!("the coordinator could not resume this job: {message}");
                     store.update_job(id, row.next_start, JobState::Failed, Some(&message))?;
                     scheduler.add_job(id, row.total, row.window, row.next_start, &[], JobState::Failed);
-                    scheduler.set_failed(id, message);
+                    scheduler.set_failed(id, message.clone());
+                    saved.insert(id, (JobState::Failed, row.next_start, Some(message)));
                     jobs.insert(id, entry_of(&row, placeholder_render(&row), Vec::new(), None));
                 }
             }
@@ -306,6 +322,7 @@ impl Farm {
             lease_keys,
             key_source: std::collections::hash_map::RandomState::new(),
             roster: Roster::default(),
+            saved,
         })
     }
 
@@ -359,6 +376,7 @@ impl Farm {
         self.scheduler
             .add_job(id, total, window, 0, &[], JobState::Queued);
         self.scheduler.set_pixels(id, width as u64 * height as u64);
+        self.saved.insert(id, (JobState::Queued, 0, None));
         let row = JobRow {
             id,
             created_ms: unix_ms(),
@@ -405,7 +423,10 @@ impl Farm {
         let key = self.new_key();
         self.roster.asked(&req.worker, req.threads);
         let renderers = req.renderers.unwrap_or(1).max(1);
-        let Some(g) = self.scheduler.lease_for(&req.worker, renderers, now) else {
+        let granted = self.scheduler.lease_for(&req.worker, renderers, now);
+        // Looking for work may fail a job that no worker may take any more.
+        self.save_changes()?;
+        let Some(g) = granted else {
             return Ok(None);
         };
         self.lease_keys.insert(g.lease_id, key.clone());
@@ -436,7 +457,6 @@ impl Farm {
             width: job.width,
             height: job.height,
         };
-        self.persist_progress(g.job_id)?;
         Ok(Some(lease))
     }
 
@@ -484,7 +504,8 @@ impl Farm {
     /// worker.
     pub fn reject(&mut self, lease_id: u64, why: &str) -> Result<(), FarmError> {
         self.scheduler.release(lease_id, Some(why))?;
-        self.forget_lease(lease_id)
+        self.forget_lease(lease_id)?;
+        self.save_changes()
     }
 
     /// Counts a result already stored durably (by [`Layout::write_batch`]): the lease ends,
@@ -547,17 +568,11 @@ impl Farm {
     /// Gives a lease back, after a failure or cleanly.
     pub fn release(&mut self, lease_id: u64, key: &str, error: Option<&str>) -> Result<(), FarmError> {
         self.check_key(lease_id, key)?;
-        let job = self
-            .scheduler
-            .lease_range(lease_id, self.now())
-            .map(|g| g.job_id)
-            .ok();
         self.scheduler.release(lease_id, error)?;
         self.forget_lease(lease_id)?;
-        if let Some(job) = job {
-            self.persist_progress(job)?;
-        }
-        Ok(())
+        // Also after the lease's deadline, before the expiry tick: the failure it may cause
+        // is saved like any other (it once stayed in memory, and a restart revived the job).
+        self.save_changes()
     }
 
     /// Ends expired leases so their passes go to other workers (each expiry counts as a
@@ -571,8 +586,8 @@ impl Farm {
                 "lease expired without a heartbeat; its passes will be re-issued"
             );
             self.forget_lease(lease)?;
-            self.persist_progress(job)?;
         }
+        self.save_changes()?;
         Ok(expired.len())
     }
 
@@ -612,6 +627,28 @@ impl Farm {
         Some((state, done, total, message))
     }
 
+    /// Writes every job whose state, first unissued pass or message differs from what the
+    /// store holds: the scheduler decides these (a lease, a failure, an expiry), and each of
+    /// its decisions is saved here, so none stays in memory only.
+    fn save_changes(&mut self) -> Result<(), FarmError> {
+        let changed: Vec<u64> = self
+            .jobs
+            .keys()
+            .copied()
+            .filter(|&id| self.saved.get(&id) != self.scheduling(id).as_ref())
+            .collect();
+        for id in changed {
+            self.persist_progress(id)?;
+        }
+        Ok(())
+    }
+
+    /// A job's scheduling as the store keeps it.
+    fn scheduling(&self, id: u64) -> Option<Saved> {
+        let (state, _, _, message) = self.reported_state(id)?;
+        Some((state, self.scheduler.next_start(id).unwrap_or(0), message))
+    }
+
     fn persist_progress(&mut self, id: u64) -> Result<(), FarmError> {
         let (state, _, _, message) = self.reported_state(id).ok_or(FarmError::NoJob(id))?;
         if state.is_final()
@@ -626,6 +663,7 @@ impl Farm {
         if let Some(job) = self.jobs.get(&id) {
             self.store.set_stats(id, job.stats())?;
         }
+        self.saved.insert(id, (state, next, message));
         Ok(())
     }
 
@@ -948,5 +986,96 @@ mod tests {
         assert_eq!(farm.status(done).unwrap().state, JobState::Done);
         assert_eq!(farm.status(done).unwrap().checkpoint_iterations, 1);
         assert_eq!(farm.status(running).unwrap().state, JobState::Queued);
+    }
+
+    /// A farm of one one-pass job, leases expiring after `timeout_ms`, in `dir`.
+    fn one_job_farm(dir: &std::path::Path, timeout_ms: u64) -> (Farm, u64) {
+        let config = FarmConfig {
+            limits: Limits::for_memory(1 << 30),
+            scheduler: SchedulerConfig {
+                lease_timeout_ms: timeout_ms,
+                ..SchedulerConfig::default()
+            },
+            ..FarmConfig::default()
+        };
+        let mut farm = Farm::open(Store::open(dir).unwrap(), config).unwrap();
+        let settings = JobSettings {
+            passes: Some(1),
+            ..JobSettings::default()
+        };
+        let job = farm
+            .create_job(&settings, render(), 1, "s.xml", "h", Accumulator::empty(4, 4, 1))
+            .unwrap();
+        (farm, job)
+    }
+
+    fn ask(farm: &mut Farm, worker: &str) -> Option<Lease> {
+        let req = LeaseRequest {
+            worker: worker.into(),
+            threads: 1,
+            renderers: None,
+        };
+        farm.lease(&req).unwrap()
+    }
+
+    /// The job's state and message after the coordinator restarts on the same folder.
+    fn after_restart(farm: Farm, dir: &std::path::Path, job: u64) -> (JobState, Option<String>) {
+        drop(farm);
+        let config = FarmConfig {
+            limits: Limits::for_memory(1 << 30),
+            ..FarmConfig::default()
+        };
+        let farm = Farm::open(Store::open(dir).unwrap(), config).unwrap();
+        let status = farm.status(job).unwrap();
+        (status.state, status.message)
+    }
+
+    #[test]
+    fn a_failure_by_a_release_after_the_lease_deadline_survives_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut farm, job) = one_job_farm(dir.path(), 30);
+        for worker in ["a", "b", "c"] {
+            let lease = ask(&mut farm, worker).unwrap();
+            // Past the deadline, before any expiry tick: the release still counts.
+            std::thread::sleep(std::time::Duration::from_millis(60));
+            farm.release(lease.lease_id, &lease.key, Some("out of memory"))
+                .unwrap();
+        }
+        assert_eq!(farm.status(job).unwrap().state, JobState::Failed);
+        let (state, message) = after_restart(farm, dir.path(), job);
+        assert_eq!(state, JobState::Failed, "a failed job is not leased again");
+        assert!(message.unwrap().contains("out of memory"));
+    }
+
+    #[test]
+    fn a_failure_by_rejected_results_survives_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut farm, job) = one_job_farm(dir.path(), 60_000);
+        for worker in ["a", "b", "c"] {
+            let lease = ask(&mut farm, worker).unwrap();
+            farm.reject(lease.lease_id, "expected 4x4, got 2x2").unwrap();
+        }
+        assert_eq!(farm.status(job).unwrap().state, JobState::Failed);
+        let (state, message) = after_restart(farm, dir.path(), job);
+        assert_eq!(state, JobState::Failed);
+        assert!(message.unwrap().contains("expected 4x4, got 2x2"));
+    }
+
+    #[test]
+    fn a_failure_because_no_worker_may_take_the_passes_survives_a_restart() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut farm, job) = one_job_farm(dir.path(), 60_000);
+        // The only worker present fails the batch twice: it may not take it again, and
+        // nobody else is there.
+        for _ in 0..2 {
+            let lease = ask(&mut farm, "only").unwrap();
+            farm.release(lease.lease_id, &lease.key, Some("GPU lost"))
+                .unwrap();
+        }
+        assert!(ask(&mut farm, "only").is_none());
+        assert_eq!(farm.status(job).unwrap().state, JobState::Failed);
+        let (state, message) = after_restart(farm, dir.path(), job);
+        assert_eq!(state, JobState::Failed);
+        assert!(message.unwrap().contains("no worker may take them"));
     }
 }
