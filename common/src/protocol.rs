@@ -4,11 +4,14 @@
 //! builds) for partial images, which are large. Only this module knows the codec, so it can be
 //! swapped without touching either program.
 
+use serde::de::DeserializeSeed;
 use serde::{Deserialize, Serialize};
 
 use crate::film::FilmSum;
 use crate::parity::{OddSums, sample_len};
 use crate::render::RenderSettings;
+
+mod bounded;
 
 /// A worker asking for work.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -137,25 +140,32 @@ pub fn encode_result(sum: &FilmSum, odd: &OddSums) -> Vec<u8> {
     out
 }
 
-/// Decodes a result, with ([`encode_result`]) or without ([`encode_batch`]) its odd passes'
-/// sample, and checks that it is whole.
-pub fn decode_result(bytes: &[u8]) -> Result<BatchResult, CodecError> {
+/// Decodes a result for a `width` × `height` image, with ([`encode_result`]) or without
+/// ([`encode_batch`]) its odd passes' sample, and checks that it is whole. The size is the
+/// receiver's (a lease's, a job's): a result of another size, or one whose vectors claim more
+/// pixels, is refused before anything is allocated for it (see [`bounded`]).
+pub fn decode_result(bytes: &[u8], width: u32, height: u32) -> Result<BatchResult, CodecError> {
     let Some(body) = bytes.strip_prefix(MAGIC_WITH_ODD.as_slice()) else {
-        return decode_batch(bytes).map(|sum| BatchResult { sum, odd: None });
+        return decode_batch(bytes, width, height).map(|sum| BatchResult { sum, odd: None });
     };
-    let ((sum, odd), used): ((FilmSum, OddSums), usize) =
-        bincode::serde::decode_from_slice(body, bincode::config::standard())
-            .map_err(|e| CodecError::Decode(e.to_string()))?;
+    let (sum, odd) = decode_whole(bounded::PairSeed(bounded::SumSeed { width, height }), body)?;
+    check_sum(&sum)?;
+    odd.check(sum.width, sum.height, sum.passes)
+        .map_err(CodecError::Invalid)?;
+    Ok(BatchResult { sum, odd: Some(odd) })
+}
+
+/// Decodes all of `body` with `seed`: trailing bytes are an error.
+fn decode_whole<'a, S: DeserializeSeed<'a>>(seed: S, body: &'a [u8]) -> Result<S::Value, CodecError> {
+    let (value, used) = bincode::serde::seed_decode_from_slice(seed, body, bincode::config::standard())
+        .map_err(|e| CodecError::Decode(e.to_string()))?;
     if used != body.len() {
         return Err(CodecError::Invalid(format!(
             "{} trailing bytes",
             body.len() - used
         )));
     }
-    check_sum(&sum)?;
-    odd.check(sum.width, sum.height, sum.passes)
-        .map_err(CodecError::Invalid)?;
-    Ok(BatchResult { sum, odd: Some(odd) })
+    Ok(value)
 }
 
 /// Encodes a partial image.
@@ -167,19 +177,13 @@ pub fn encode_batch(sum: &FilmSum) -> Vec<u8> {
     out
 }
 
-/// Decodes a partial image and checks that it is whole.
-pub fn decode_batch(bytes: &[u8]) -> Result<FilmSum, CodecError> {
+/// Decodes a partial image of `width` × `height` pixels and checks that it is whole (bounded
+/// as [`decode_result`] is).
+pub fn decode_batch(bytes: &[u8], width: u32, height: u32) -> Result<FilmSum, CodecError> {
     let body = bytes
         .strip_prefix(MAGIC.as_slice())
         .ok_or_else(|| CodecError::Decode("missing the PFBATCH1 header".into()))?;
-    let (sum, used): (FilmSum, usize) = bincode::serde::decode_from_slice(body, bincode::config::standard())
-        .map_err(|e| CodecError::Decode(e.to_string()))?;
-    if used != body.len() {
-        return Err(CodecError::Invalid(format!(
-            "{} trailing bytes",
-            body.len() - used
-        )));
-    }
+    let sum = decode_whole(bounded::SumSeed { width, height }, body)?;
     check_sum(&sum)?;
     Ok(sum)
 }
@@ -214,12 +218,12 @@ mod tests {
         f.sums[4] = [1, -2, 1 << 40];
         f.passes = 7;
         let bytes = encode_batch(&f);
-        assert_eq!(decode_batch(&bytes).unwrap(), f);
-        assert!(decode_batch(b"nonsense").is_err());
-        assert!(decode_batch(&bytes[..bytes.len() - 3]).is_err());
+        assert_eq!(decode_batch(&bytes, 3, 2).unwrap(), f);
+        assert!(decode_batch(b"nonsense", 3, 2).is_err());
+        assert!(decode_batch(&bytes[..bytes.len() - 3], 3, 2).is_err());
         let mut extra = bytes.clone();
         extra.push(0);
-        assert!(decode_batch(&extra).is_err());
+        assert!(decode_batch(&extra, 3, 2).is_err());
         let mut worst = FilmSum::new(3, 2);
         worst
             .sums
@@ -245,14 +249,44 @@ mod tests {
         let mut odd = OddSums::empty(3, 2);
         odd.sums[1] = [2, 2, 2];
         odd.passes = 1;
-        let r = decode_result(&encode_result(&f, &odd)).unwrap();
+        let r = decode_result(&encode_result(&f, &odd), 3, 2).unwrap();
         assert_eq!((r.sum, r.odd), (f.clone(), Some(odd.clone())));
-        assert_eq!(decode_result(&encode_batch(&f)).unwrap().odd, None);
+        assert_eq!(decode_result(&encode_batch(&f), 3, 2).unwrap().odd, None);
         // More odd passes than passes, or a sample of the wrong size, is refused.
         odd.passes = 4;
-        assert!(decode_result(&encode_result(&f, &odd)).is_err());
-        assert!(decode_result(&encode_result(&f, &OddSums::empty(2, 2))).is_err());
+        assert!(decode_result(&encode_result(&f, &odd), 3, 2).is_err());
+        assert!(decode_result(&encode_result(&f, &OddSums::empty(2, 2)), 3, 2).is_err());
         let bytes = encode_result(&f, &OddSums::empty(3, 2));
-        assert!(decode_result(&bytes[..bytes.len() - 1]).is_err());
+        assert!(decode_result(&bytes[..bytes.len() - 1], 3, 2).is_err());
+    }
+
+    #[test]
+    fn a_result_of_another_size_or_claiming_more_pixels_is_refused() {
+        let f = FilmSum::new(3, 2);
+        let e = decode_batch(&encode_batch(&f), 2, 3).unwrap_err().to_string();
+        assert!(e.contains("a 3x2 image where 2x3 was expected"), "{e}");
+        // A 3x2 header whose pixel vector claims a million pixels: refused at the length.
+        let mut bytes = MAGIC.to_vec();
+        bytes.extend(
+            bincode::serde::encode_to_vec((3u32, 2u32, 1_000_000u64), bincode::config::standard()).unwrap(),
+        );
+        let e = decode_batch(&bytes, 3, 2).unwrap_err().to_string();
+        assert!(
+            e.contains("1000000 pixel sums where the image has room for 6"),
+            "{e}"
+        );
+        // So is an odd-pass sample longer than the image's.
+        let odd = OddSums {
+            sums: vec![[0; 3]; 7],
+            weights: Vec::new(),
+            passes: 0,
+        };
+        let e = decode_result(&encode_result(&f, &odd), 3, 2)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("7 odd-pass sums where the image has room for 6"),
+            "{e}"
+        );
     }
 }

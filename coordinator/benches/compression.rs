@@ -80,8 +80,8 @@ fn main() {
                 mb / c,
                 mb / d
             );
-            let dec = median(|| timed(|| drop(decode_result(&plain).unwrap())));
-            let r = decode_result(&plain).unwrap();
+            let dec = median(|| timed(|| drop(decode_result(&plain, w, h).unwrap())));
+            let r = decode_result(&plain, w, h).unwrap();
             let mut acc = r.sum.clone();
             let add = median(|| timed(|| acc.add(&r.sum).unwrap()));
             println!(

@@ -627,7 +627,7 @@ fn store_result(
             return Err(ApiError::from(FarmError::BadResult(msg)));
         }
     };
-    let decoded = decode_result(&plain);
+    let decoded = decode_result(&plain, expected.width, expected.height);
     drop(plain);
     let (sum, odd) = match decoded {
         Ok(r)

@@ -88,16 +88,9 @@ pub fn load(path: &Path, fingerprint: &str, width: u32, height: u32) -> anyhow::
             path.display()
         );
     }
-    let sum = decode_batch(&bytes[(newline + 1).min(bytes.len())..])
+    // A file of another image size is refused as damaged, with both sizes named.
+    let sum = decode_batch(&bytes[(newline + 1).min(bytes.len())..], width, height)
         .with_context(|| format!("--resume: {} is damaged", path.display()))?;
-    if (sum.width, sum.height) != (width, height) {
-        bail!(
-            "--resume: {} holds a {}x{} image, the scene is {width}x{height}",
-            path.display(),
-            sum.width,
-            sum.height
-        );
-    }
     Ok(sum)
 }
 

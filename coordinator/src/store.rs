@@ -221,7 +221,7 @@ impl Layout {
     pub fn load_prefix(&self, job: u64, width: u32, height: u32) -> Result<BatchResult, StoreError> {
         let path = self.job_dir(job).join("prefix.bin");
         match std::fs::read(&path) {
-            Ok(bytes) => decode_result(&bytes)
+            Ok(bytes) => decode_result(&bytes, width, height)
                 .map_err(|e| StoreError::Corrupt(path.display().to_string(), e.to_string())),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(BatchResult {
                 sum: FilmSum::new(width, height),
@@ -246,7 +246,7 @@ impl Layout {
         let bytes = std::fs::read(&path).map_err(io(&path))?;
         let bytes = photonfarm::compression::decode_stored(bytes, max_encoded_batch(width, height))
             .map_err(|e| corrupt(e.to_string()))?;
-        decode_result(&bytes).map_err(|e| corrupt(e.to_string()))
+        decode_result(&bytes, width, height).map_err(|e| corrupt(e.to_string()))
     }
 }
 

@@ -134,7 +134,7 @@ mod tests {
     #[test]
     fn results_decode_and_scale_with_the_pass_count() {
         let s = Synthetic::flat(64, 32);
-        let r = photonfarm::protocol::decode_result(&s.encoded(4, 2, 7)).unwrap();
+        let r = photonfarm::protocol::decode_result(&s.encoded(4, 2, 7), 64, 32).unwrap();
         assert_eq!((r.sum.width, r.sum.height, r.sum.passes), (64, 32, 4));
         assert_eq!(r.odd.unwrap().passes, 2);
         let mean = |f: &FilmSum| f.sums.iter().map(|p| p[0] as f64).sum::<f64>() / f.sums.len() as f64;

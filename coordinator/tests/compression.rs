@@ -76,7 +76,7 @@ async fn compressed_and_plain_results_are_accepted_and_bombs_refused() {
     let mut plain = result_8x8();
     // Pass 1 is odd: its sample must hold one odd pass; a one-pass PFBATCH1 needs none.
     plain = {
-        let r = photonfarm::protocol::decode_result(&plain).unwrap();
+        let r = photonfarm::protocol::decode_result(&plain, 8, 8).unwrap();
         photonfarm::protocol::encode_batch(&r.sum)
     };
     assert_eq!(put(&api, id, &key, None, plain).await, StatusCode::OK);

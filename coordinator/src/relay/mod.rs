@@ -38,10 +38,6 @@ use crate::cli::RelayArgs;
 use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use book::{Book, PartError};
 
-/// Largest result accepted when the upstream does not say the image size (an older
-/// coordinator): that of a 50-megapixel image.
-const UNKNOWN_SIZE_MAX: u64 = 50 << 20;
-
 /// Shared by the relay's handlers and loops.
 pub struct Relay {
     book: Mutex<Book>,
@@ -282,11 +278,18 @@ async fn result(
     let encoding = result_encoding(&headers)
         .map_err(|e| RelayError(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     let info = relay.book().expected(id, &key)?;
-    let max = if info.width == 0 {
-        UNKNOWN_SIZE_MAX
-    } else {
-        max_encoded_batch(info.width, info.height)
-    };
+    if info.width == 0 {
+        // Without the size no result can be bounded by its image (an older coordinator).
+        return Err(RelayError(
+            StatusCode::BAD_GATEWAY,
+            format!(
+                "the upstream coordinator did not say lease {id}'s image size, which a relay \
+                 needs to bound its results: upgrade the coordinator"
+            ),
+        ));
+    }
+    let (width, height) = (info.width, info.height);
+    let max = max_encoded_batch(width, height);
     let (body, _slot) = read_result_body(&headers, req, encoding, max, &relay.uploads)
         .await
         .map_err(|e| match e {
@@ -298,7 +301,7 @@ async fn result(
         })?;
     let decoded = tokio::task::spawn_blocking(move || {
         let plain = compression::decompress_bounded(encoding, &body, max)?;
-        decode_result(&plain).map_err(|e| CompressionError::Malformed(e.to_string()))
+        decode_result(&plain, width, height).map_err(|e| CompressionError::Malformed(e.to_string()))
     })
     .await
     .map_err(bad_gateway)?;
@@ -311,9 +314,7 @@ async fn result(
     };
     let passes = info.end - info.start;
     let odd_passes = info.end / 2 - info.start / 2;
-    let fits = r.sum.passes == passes
-        && (info.width == 0 || (r.sum.width, r.sum.height) == (info.width, info.height))
-        && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes);
+    let fits = r.sum.passes == passes && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes);
     if !fits {
         let msg = format!(
             "result does not match the lease: expected {passes} passes ({odd_passes} odd), got {}x{} with {}",
