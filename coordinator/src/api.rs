@@ -31,7 +31,8 @@ use crate::admission::Admission;
 use crate::farm::{Committed, Farm, FarmError};
 use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use crate::scene_check::{CheckError, check_in_child};
-use crate::store::Layout;
+use crate::scheduler::LeaseError;
+use crate::store::{Layout, StoredBatch};
 
 /// Who may call what: users submit and read jobs, workers lease and render. Separate tokens
 /// keep a worker's credentials (often spread over many machines) from cancelling or reading
@@ -664,16 +665,33 @@ fn store_result(
         }
     };
     // The body is the batch's encoding: stored as received (compressed or not), then dropped.
+    // Under a name of this lease's own; only the commit's row makes it count.
+    let batch = StoredBatch {
+        start: expected.start,
+        end: expected.end,
+        lease: id,
+    };
     state
         .layout
-        .write_batch_bytes(expected.job, expected.start, expected.end, &body, id)
+        .write_batch_bytes(expected.job, batch, &body)
         .map_err(|e| ApiError::internal(format!("storage: {e}")))?;
     drop(body);
     let Committed {
         job,
         sum: job_sum,
         total,
-    } = with_farm(state, |f| f.commit(id, key, len))?;
+    } = with_farm(state, |f| {
+        f.commit(id, key, len).inspect_err(|e| {
+            // The lease moved on while the body was read: the file was never recorded, so it
+            // never counted, and it goes.
+            if matches!(
+                e,
+                FarmError::Lease(LeaseError::NotActive(_)) | FarmError::NotYours(_)
+            ) {
+                let _ = std::fs::remove_file(state.layout.batch_path(expected.job, batch));
+            }
+        })
+    })?;
     merge(state, job, &job_sum, total, expected.start, sum, odd)
 }
 

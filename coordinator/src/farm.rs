@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use crate::accumulator::Accumulator;
 use crate::scheduler::{Grant, JobState, LeaseError, Scheduler, SchedulerConfig};
-use crate::store::{JobRow, JobStats, Layout, LeaseRow, Store, StoreError};
+use crate::store::{JobRow, JobStats, Layout, LeaseRow, Store, StoreError, StoredBatch};
 use crate::workers::{Holding, Roster, WorkerStatus};
 
 /// Farm settings.
@@ -520,7 +520,12 @@ impl Farm {
             let rate = self.scheduler.worker_rate(g.job_id, &worker).unwrap_or(0.0);
             self.roster.delivered(&worker, g.end - g.start, rate);
         }
-        self.store.record_batch(g.job_id, g.start, g.end)?;
+        let batch = StoredBatch {
+            start: g.start,
+            end: g.end,
+            lease: lease_id,
+        };
+        self.store.record_batch(g.job_id, batch)?;
         self.forget_lease(lease_id)?;
         let job = self.jobs.get_mut(&g.job_id).expect("known");
         job.batches_received += 1;
@@ -860,10 +865,11 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
     let noise_saved = noise.len();
     let last_saved = noise.last().map_or(0, |l| l.0);
     let ranges = store.batch_ranges(row.id).map_err(|e| e.to_string())?;
-    for (start, end) in ranges {
+    for batch in ranges {
+        let StoredBatch { start, end, .. } = batch;
         // A damaged batch is dropped: its passes are simply rendered again.
         let added = layout
-            .load_batch(row.id, start, end, row.width, row.height)
+            .load_batch(row.id, batch, row.width, row.height)
             .and_then(|r| {
                 acc.add(start, r.sum, r.odd)
                     .map_err(|e| StoreError::Corrupt(format!("batch {start}..{end}"), e.to_string()))
@@ -876,9 +882,7 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
                     job = row.id,
                     "dropping a damaged batch ({e}); its passes will be rendered again"
                 );
-                store
-                    .forget_batch(row.id, start, end)
-                    .map_err(|e| e.to_string())?;
+                store.forget_batch(row.id, batch).map_err(|e| e.to_string())?;
             }
         }
     }
@@ -1077,5 +1081,54 @@ mod tests {
         let (state, message) = after_restart(farm, dir.path(), job);
         assert_eq!(state, JobState::Failed);
         assert!(message.unwrap().contains("no worker may take them"));
+    }
+
+    #[test]
+    fn a_result_whose_lease_moved_on_never_replaces_the_one_that_counts() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut farm, job) = one_job_farm(dir.path(), 30);
+        let layout = farm.layout();
+        let result = |value: i64| {
+            let mut sum = FilmSum::new(4, 4);
+            sum.sums.iter_mut().for_each(|p| *p = [value; 3]);
+            sum.passes = 1;
+            photonfarm::protocol::encode_batch(&sum)
+        };
+        let stored = |lease: &Lease| StoredBatch {
+            start: lease.start,
+            end: lease.end,
+            lease: lease.lease_id,
+        };
+        // Worker a's result is checked against its live lease (its head arrives)...
+        let late = ask(&mut farm, "a").unwrap();
+        farm.expected_result(late.lease_id, &late.key).unwrap();
+        // ...but its body is slow: the lease expires and worker b renders the same passes.
+        std::thread::sleep(std::time::Duration::from_millis(60));
+        assert_eq!(farm.expire().unwrap(), 1);
+        let honest = ask(&mut farm, "b").unwrap();
+        assert_eq!((honest.start, honest.end), (late.start, late.end));
+        layout
+            .write_batch_bytes(job, stored(&honest), &result(7))
+            .unwrap();
+        farm.commit(honest.lease_id, &honest.key, 1).unwrap();
+        // a's body lands at last, and its commit is refused.
+        layout
+            .write_batch_bytes(job, stored(&late), &result(666))
+            .unwrap();
+        assert!(farm.commit(late.lease_id, &late.key, 1).is_err());
+        // After a restart the job is made of b's result, not a's.
+        drop(farm);
+        let config = FarmConfig {
+            limits: Limits::for_memory(1 << 30),
+            ..FarmConfig::default()
+        };
+        let farm = Farm::open(Store::open(dir.path()).unwrap(), config).unwrap();
+        assert_eq!(farm.status(job).unwrap().state, JobState::Done);
+        let prefix = farm.layout().load_prefix(job, 4, 4).unwrap();
+        assert!(
+            prefix.sum.sums.iter().all(|p| *p == [7; 3]),
+            "{:?}",
+            prefix.sum.sums[0]
+        );
     }
 }

@@ -9,7 +9,9 @@
 //! bundles/HASH.tar, HASH/     job bundles, content-addressed, and their unpacked files
 //! jobs/ID/prefix.bin          passes [0, N) summed (the accumulator's prefix), with its odd
 //!                             passes on the sampled pixels (photonfarm::parity)
-//! jobs/ID/batch-S-E.bin       results of passes [S, E) not yet merged into the prefix
+//! jobs/ID/batch-S-E-lL.bin    result of passes [S, E) delivered under lease L, not yet
+//!                             merged into the prefix (batch-S-E.bin: stored before lease ids
+//!                             were part of the name)
 //! jobs/ID/image.exr, .png     the latest checkpoint
 //! ```
 //!
@@ -86,6 +88,18 @@ pub struct JobStats {
     pub batches_received: u64,
     /// Bytes of batch results received.
     pub bytes_received: u64,
+}
+
+/// A stored batch result: passes [start, end), delivered under `lease` (0 for a batch
+/// stored before lease ids were recorded).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StoredBatch {
+    /// First pass.
+    pub start: u64,
+    /// One past the last pass.
+    pub end: u64,
+    /// The lease whose result it is.
+    pub lease: u64,
 }
 
 /// A lease as stored: a batch a worker holds survives a coordinator restart, so that a worker
@@ -173,23 +187,21 @@ impl Layout {
         self.job_dir(id).join(format!("image.{ext}"))
     }
 
-    /// Where the result of passes [start, end) is kept until merged.
-    pub fn batch_path(&self, job: u64, start: u64, end: u64) -> PathBuf {
-        self.job_dir(job).join(format!("batch-{start}-{end}.bin"))
+    /// Where a batch's result is kept until merged. The name holds the lease that delivered
+    /// it, so a result whose lease has moved on can never replace the one that counts: only
+    /// the row [`Store::record_batch`] writes makes a file count.
+    pub fn batch_path(&self, job: u64, b: StoredBatch) -> PathBuf {
+        let StoredBatch { start, end, lease } = b;
+        let name = match lease {
+            0 => format!("batch-{start}-{end}.bin"),
+            _ => format!("batch-{start}-{end}-l{lease}.bin"),
+        };
+        self.job_dir(job).join(name)
     }
 
-    /// Stores an encoded batch result of passes [start, end) durably (before its row is
-    /// recorded under the lock). `tag` makes the temporary name unique among concurrent
-    /// writers of the same range.
-    pub fn write_batch_bytes(
-        &self,
-        job: u64,
-        start: u64,
-        end: u64,
-        encoded: &[u8],
-        tag: u64,
-    ) -> Result<(), StoreError> {
-        write_durably_as(&self.batch_path(job, start, end), encoded, tag)
+    /// Stores an encoded batch result durably, before its row is recorded under the lock.
+    pub fn write_batch_bytes(&self, job: u64, b: StoredBatch, encoded: &[u8]) -> Result<(), StoreError> {
+        write_durably_as(&self.batch_path(job, b), encoded, b.lease)
     }
 
     /// Stores a job's prefix (passes [0, N) summed) durably, with its odd passes' sample if
@@ -236,12 +248,11 @@ impl Layout {
     pub fn load_batch(
         &self,
         job: u64,
-        start: u64,
-        end: u64,
+        b: StoredBatch,
         width: u32,
         height: u32,
     ) -> Result<BatchResult, StoreError> {
-        let path = self.batch_path(job, start, end);
+        let path = self.batch_path(job, b);
         let corrupt = |e: String| StoreError::Corrupt(path.display().to_string(), e);
         let bytes = std::fs::read(&path).map_err(io(&path))?;
         let bytes = photonfarm::compression::decode_stored(bytes, max_encoded_batch(width, height))
@@ -283,6 +294,11 @@ impl Store {
                 [],
             );
         }
+        // The lease that delivered each stored batch (0: stored before, under the old name).
+        let _ = db.execute(
+            "ALTER TABLE batches ADD COLUMN lease INTEGER NOT NULL DEFAULT 0",
+            [],
+        );
         // Scratch folders of submissions a crash interrupted: nothing refers to them.
         if let Ok(entries) = std::fs::read_dir(dir.join("bundles")) {
             for e in entries.flatten() {
@@ -480,35 +496,40 @@ impl Store {
         Ok(rows.collect::<Result<_, _>>()?)
     }
 
-    /// Records a batch result whose file [`Layout::write_batch`] has stored.
-    pub fn record_batch(&mut self, job: u64, start: u64, end: u64) -> Result<(), StoreError> {
+    /// Records a batch result whose file [`Layout::write_batch_bytes`] has stored: from
+    /// here on it counts.
+    pub fn record_batch(&mut self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
         self.db.execute(
-            "INSERT OR REPLACE INTO batches (job, start, end) VALUES (?1, ?2, ?3)",
-            params![job as i64, start as i64, end as i64],
+            "INSERT OR REPLACE INTO batches (job, start, end, lease) VALUES (?1, ?2, ?3, ?4)",
+            params![job as i64, b.start as i64, b.end as i64, b.lease as i64],
         )?;
         Ok(())
     }
 
-    /// Ranges of the batch results stored for a job and not yet merged into its prefix.
-    pub fn batch_ranges(&self, job: u64) -> Result<Vec<(u64, u64)>, StoreError> {
+    /// The batch results stored for a job and not yet merged into its prefix.
+    pub fn batch_ranges(&self, job: u64) -> Result<Vec<StoredBatch>, StoreError> {
         let mut stmt = self
             .db
-            .prepare("SELECT start, end FROM batches WHERE job = ?1 ORDER BY start")?;
+            .prepare("SELECT start, end, lease FROM batches WHERE job = ?1 ORDER BY start")?;
         let ranges = stmt
             .query_map(params![job as i64], |r| {
-                Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u64))
+                Ok(StoredBatch {
+                    start: r.get::<_, i64>(0)? as u64,
+                    end: r.get::<_, i64>(1)? as u64,
+                    lease: r.get::<_, i64>(2)? as u64,
+                })
             })?
             .collect::<Result<_, _>>()?;
         Ok(ranges)
     }
 
     /// Forgets a batch (merged into a stored prefix, or found damaged) and removes its file.
-    pub fn forget_batch(&mut self, job: u64, start: u64, end: u64) -> Result<(), StoreError> {
+    pub fn forget_batch(&mut self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
         self.db.execute(
             "DELETE FROM batches WHERE job = ?1 AND start = ?2 AND end = ?3",
-            params![job as i64, start as i64, end as i64],
+            params![job as i64, b.start as i64, b.end as i64],
         )?;
-        let _ = std::fs::remove_file(self.layout.batch_path(job, start, end));
+        let _ = std::fs::remove_file(self.layout.batch_path(job, b));
         Ok(())
     }
 
@@ -540,13 +561,13 @@ impl Store {
 
     /// Forgets the batches a stored prefix of `passes` passes contains.
     pub fn forget_merged(&mut self, job: u64, passes: u64) -> Result<(), StoreError> {
-        let merged: Vec<(u64, u64)> = self
+        let merged: Vec<StoredBatch> = self
             .batch_ranges(job)?
             .into_iter()
-            .filter(|&(_, e)| e <= passes)
+            .filter(|b| b.end <= passes)
             .collect();
-        for (s, e) in merged {
-            self.forget_batch(job, s, e)?;
+        for b in merged {
+            self.forget_batch(job, b)?;
         }
         Ok(())
     }
