@@ -154,3 +154,22 @@ fn bad_principled_parameters_are_clear_errors() {
         assert!(!err.contains('\n'), "one line: {err}");
     }
 }
+
+/// Mitsuba reads principled's weights as textures, and an `<rgb>` there is its `srgb` texture,
+/// whose `eval_1` is the mean of the three channels (src/spectra/srgb.cpp): one held-out
+/// Blender export gives `spec_tint` so. Out of [0, 1] it is refused, as Mitsuba refuses it.
+#[test]
+fn an_rgb_weight_is_the_mean_of_its_channels() {
+    let scene =
+        with_principled(r#"<rgb name="spec_tint" value="0.2, 0.4, 0.9"/><rgb name="sheen" value="0.5"/>"#)
+            .unwrap();
+    let p = principled_of(&scene);
+    let fixed = |v: &photonfarm::texture::Param<f32>| match v {
+        photonfarm::texture::Param::Fixed(x) => *x,
+        photonfarm::texture::Param::Textured(_) => panic!("a number was expected"),
+    };
+    assert_eq!(fixed(&p.spec_tint), (0.2f32 + 0.4 + 0.9) / 3.0);
+    assert_eq!(fixed(&p.sheen), 0.5);
+    let e = with_principled(r#"<rgb name="spec_tint" value="0.2, 1.4, 0.9"/>"#).unwrap_err();
+    assert!(e.contains("'spec_tint' must lie in [0, 1]"), "{e}");
+}

@@ -1008,11 +1008,11 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// A number parameter of a material: a texture, or a number.
+    /// A number parameter of a material: a texture, or a number (an `<rgb>` is its mean).
     fn float_param(&mut self, p: &Props, name: &str, default: f32) -> Res<Param<f32>> {
         match self.texture_param(p, name)? {
             Some(t) => Ok(Param::Textured(t)),
-            None => Ok(Param::Fixed(p.float_or(name, default)?)),
+            None => Ok(Param::Fixed(p.float_of_texture(name, default)?)),
         }
     }
 

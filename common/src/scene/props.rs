@@ -157,6 +157,17 @@ impl<'a> Props<'a> {
         Ok(self.float(name)?.unwrap_or(default))
     }
 
+    /// A number that Mitsuba reads through a texture's `eval_1` (a mask's opacity, a blend's
+    /// weight, the principled weights): a `<float>`, or an `<rgb>`, which Mitsuba holds as an
+    /// `srgb` reflectance (channels in [0, 1]) and evaluates as the mean of its channels.
+    pub fn float_of_texture(&self, name: &str, default: f32) -> Res<f32> {
+        if self.tag_of(name) == Some("rgb") {
+            let c = self.reflectance(name, Rgb::ZERO)?;
+            return Ok((c.x + c.y + c.z) / 3.0);
+        }
+        self.float_or(name, default)
+    }
+
     /// A float that must be > 0.
     pub fn positive(&self, name: &str, default: f32) -> Res<f32> {
         let v = self.float_or(name, default)?;
