@@ -31,7 +31,6 @@ use crate::admission::Admission;
 use crate::farm::{Committed, Farm, FarmError};
 use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use crate::scene_check::{CheckError, check_in_child};
-use crate::scheduler::LeaseError;
 use crate::store::{Layout, StoredBatch};
 
 /// Who may call what: users submit and read jobs, workers lease and render. Separate tokens
@@ -681,16 +680,13 @@ fn store_result(
         sum: job_sum,
         total,
     } = with_farm(state, |f| {
-        f.commit(id, key, len).inspect_err(|e| {
-            // The lease moved on while the body was read: the file was never recorded, so it
-            // never counted, and it goes.
-            if matches!(
-                e,
-                FarmError::Lease(LeaseError::NotActive(_)) | FarmError::NotYours(_)
-            ) {
-                let _ = std::fs::remove_file(state.layout.batch_path(expected.job, batch));
-            }
-        })
+        let committed = f.commit(id, key, len);
+        // Refused (the lease moved on while the body was read): unless a row names the file
+        // (a retried upload of a result already counted), it never counted, and it goes.
+        if committed.is_err() && !f.store().has_batch(expected.job, batch).unwrap_or(true) {
+            let _ = std::fs::remove_file(state.layout.batch_path(expected.job, batch));
+        }
+        committed
     })?;
     merge(state, job, &job_sum, total, expected.start, sum, odd)
 }

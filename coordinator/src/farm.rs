@@ -1116,6 +1116,10 @@ mod tests {
             .write_batch_bytes(job, stored(&late), &result(666))
             .unwrap();
         assert!(farm.commit(late.lease_id, &late.key, 1).is_err());
+        // Only the honest batch is named by a row: the late file is the one a refused upload
+        // removes, and a retried upload of a counted result keeps its file.
+        assert!(farm.store().has_batch(job, stored(&honest)).unwrap());
+        assert!(!farm.store().has_batch(job, stored(&late)).unwrap());
         // After a restart the job is made of b's result, not a's.
         drop(farm);
         let config = FarmConfig {

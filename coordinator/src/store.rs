@@ -295,10 +295,17 @@ impl Store {
             );
         }
         // The lease that delivered each stored batch (0: stored before, under the old name).
-        let _ = db.execute(
-            "ALTER TABLE batches ADD COLUMN lease INTEGER NOT NULL DEFAULT 0",
-            [],
-        );
+        // Added only where missing, and an error here is one: without the column no batch
+        // could be read back, and every job with stored batches would fail at restore.
+        let has_lease = db
+            .prepare("SELECT 1 FROM pragma_table_info('batches') WHERE name = 'lease'")?
+            .exists([])?;
+        if !has_lease {
+            db.execute(
+                "ALTER TABLE batches ADD COLUMN lease INTEGER NOT NULL DEFAULT 0",
+                [],
+            )?;
+        }
         // Scratch folders of submissions a crash interrupted: nothing refers to them.
         if let Ok(entries) = std::fs::read_dir(dir.join("bundles")) {
             for e in entries.flatten() {
@@ -504,6 +511,14 @@ impl Store {
             params![job as i64, b.start as i64, b.end as i64, b.lease as i64],
         )?;
         Ok(())
+    }
+
+    /// Whether a row names this batch (its result counted).
+    pub fn has_batch(&self, job: u64, b: StoredBatch) -> Result<bool, StoreError> {
+        Ok(self
+            .db
+            .prepare("SELECT 1 FROM batches WHERE job = ?1 AND start = ?2 AND lease = ?3")?
+            .exists(params![job as i64, b.start as i64, b.lease as i64])?)
     }
 
     /// The batch results stored for a job and not yet merged into its prefix.
