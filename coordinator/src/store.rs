@@ -150,8 +150,21 @@ fn write_durably_as(path: &Path, bytes: &[u8], tag: u64) -> Result<(), StoreErro
     use std::io::Write;
     let dir = path.parent().expect("stored files live in a folder");
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let tmp = path.with_extension(format!("tmp{tag}"));
-    let mut f = std::fs::File::create(&tmp).map_err(io(&tmp))?;
+    // Beside the file, its whole name kept (x.exr and x.png never share one), and created
+    // anew: a stale file or a planted symlink there is removed, never followed, and one
+    // planted again in between makes the open fail instead of writing through it.
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(format!(".tmp{tag}"));
+    let tmp = dir.join(name);
+    match std::fs::remove_file(&tmp) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io(&tmp)(e)),
+        _ => {}
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(io(&tmp))?;
     f.write_all(bytes).map_err(io(&tmp))?;
     f.sync_all().map_err(io(&tmp))?;
     std::fs::rename(&tmp, path).map_err(io(path))?;
@@ -585,5 +598,26 @@ impl Store {
             self.forget_batch(job, b)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn a_symlink_planted_at_the_temporary_name_is_not_followed() {
+        let dir = tempfile::tempdir().unwrap();
+        let victim = dir.path().join("victim.txt");
+        std::fs::write(&victim, b"keep me").unwrap();
+        let out = dir.path().join("out.exr");
+        // Wherever the temporary file might be: with the extension replaced or appended to.
+        for tmp in ["out.tmp0", "out.exr.tmp0"] {
+            std::os::unix::fs::symlink(&victim, dir.path().join(tmp)).unwrap();
+        }
+        write_durably(&out, b"image").unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"image");
+        assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
     }
 }
