@@ -102,6 +102,12 @@ pub fn decompress_bounded(
     match encoding {
         Encoding::Identity if bytes.len() as u64 > max => Err(CompressionError::TooLarge(max)),
         Encoding::Identity => Ok(Cow::Borrowed(bytes)),
+        // A body stored as received is recognised by the magic number of its first frame, so
+        // one that opened with a skippable frame would be accepted now and misread as plain
+        // bytes, then dropped, at a restart.
+        Encoding::Zstd if !bytes.starts_with(&ZSTD_MAGIC) => Err(CompressionError::Malformed(
+            "a zstd body must start with a zstd frame (not a skippable frame)".into(),
+        )),
         Encoding::Zstd => {
             let decoder = zstd::stream::read::Decoder::with_buffer(bytes)
                 .map_err(|e| CompressionError::Malformed(e.to_string()))?;
@@ -175,5 +181,23 @@ mod tests {
         );
         assert!(Encoding::from_header(Some("gzip")).is_err());
         assert_eq!(Encoding::Zstd.header(), Some("zstd"));
+    }
+
+    #[test]
+    fn a_body_that_opens_with_a_skippable_frame_is_refused() {
+        // A skippable frame (magic 0x184D2A50, little-endian, then a 4-byte length) before a
+        // real one: zstd itself skips it.
+        let data = b"PFBATCH1 plain bytes".to_vec();
+        let mut body = vec![0x50, 0x2a, 0x4d, 0x18, 3, 0, 0, 0, 1, 2, 3];
+        body.extend(compress(&data));
+        let e = decompress_bounded(Encoding::Zstd, &body, 1 << 20).unwrap_err();
+        assert!(e.to_string().contains("must start with a zstd frame"), "{e}");
+        // What is accepted is what a restart reads back the same.
+        let z = compress(&data);
+        assert_eq!(
+            decompress_bounded(Encoding::Zstd, &z, 1 << 20).unwrap(),
+            data.as_slice()
+        );
+        assert_eq!(decode_stored(z, 1 << 20).unwrap(), data);
     }
 }
