@@ -11,6 +11,8 @@
 use photonfarm::bundle::UnpackLimits;
 use photonfarm::limits::Limits;
 
+use crate::serving::ServingLimits;
+
 /// The coordinator's limits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Admission {
@@ -29,13 +31,8 @@ pub struct Admission {
     pub max_uploads: usize,
     /// Scenes loaded at the same time to check a submission.
     pub max_scene_checks: usize,
-    /// Open connections; more wait in the listen backlog.
-    pub max_connections: usize,
-    /// Seconds a connection may stay silent (while a request is read, or idle between
-    /// requests) before it is closed; not while an authenticated request is handled.
-    pub idle_timeout_s: u64,
-    /// Seconds a request head may take from its first byte to its end, however it trickles.
-    pub header_timeout_s: u64,
+    /// Connections, their timeouts and the body timeout (as for a relay).
+    pub serving: ServingLimits,
     /// Seconds a submitted scene may take to load and check.
     pub scene_check_timeout_s: u64,
 }
@@ -52,10 +49,8 @@ impl Admission {
             },
             max_geometry: (memory / 128).clamp(16 << 20, 4 << 30),
             max_uploads: 4,
-            max_scene_checks: 1,
-            max_connections: 256,
-            idle_timeout_s: 60,
-            header_timeout_s: 10,
+            max_scene_checks: 2,
+            serving: ServingLimits::default(),
             scene_check_timeout_s: 120,
         }
     }

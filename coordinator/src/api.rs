@@ -29,8 +29,9 @@ use tokio::sync::Semaphore;
 use crate::accumulator::Accumulator;
 use crate::admission::Admission;
 use crate::farm::{Committed, Farm, FarmError};
-use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
+use crate::result_body::{BodyError, lease_key, receive_result_to, result_encoding};
 use crate::scene_check::{CheckError, check_in_child};
+use crate::serving::JSON_LIMIT;
 use crate::store::{Layout, StoredBatch};
 
 /// Who may call what: users submit and read jobs, workers lease and render. Separate tokens
@@ -58,8 +59,12 @@ pub struct AppState {
     pub checker: Option<PathBuf>,
     /// Names scratch folders for incoming bundles.
     pub uploads: AtomicU64,
-    /// Uploads read at once (bounds the memory they take together).
-    pub upload_slots: Semaphore,
+    /// Bundles read at once (each is streamed to disk: bounds the space they take together).
+    pub bundle_slots: Semaphore,
+    /// Results decoded at once, once received (bounds the memory they take together).
+    pub result_slots: Semaphore,
+    /// Leases whose result is being received.
+    pub receiving: Mutex<std::collections::HashSet<u64>>,
     /// Scene checks at once (loading a scene can take many times its files' size).
     pub scene_checks: Semaphore,
     /// What `/metrics` reports beyond the farm's state.
@@ -108,13 +113,10 @@ impl From<FarmError> for ApiError {
 
 type ApiResult<T> = Result<T, ApiError>;
 
-/// Bodies of JSON endpoints (and the `settings` form field) are small; 64 KiB is plenty.
-const JSON_LIMIT: usize = 64 * 1024;
-
 /// The router.
 pub fn router(state: Arc<AppState>) -> Router {
     let upload = DefaultBodyLimit::max(state.admission.max_upload as usize);
-    Router::new()
+    let routes = Router::new()
         .route("/healthz", get(|| async { Json(json!({ "status": "ok" })) }))
         .route("/metrics", get(metrics))
         .route("/api/jobs", post(submit).layer(upload).get(list))
@@ -135,9 +137,8 @@ pub fn router(state: Arc<AppState>) -> Router {
             "/api/leases/{id}/release",
             post(release).layer(DefaultBodyLimit::max(JSON_LIMIT)),
         )
-        .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint (see docs/api.md)") })
-        .layer(DefaultBodyLimit::max(JSON_LIMIT))
-        .layer(middleware::from_fn(busy))
+        .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint (see docs/api.md)") });
+    crate::serving::guarded(routes, &state.admission.serving)
         .layer(middleware::from_fn_with_state(state.clone(), auth))
         .with_state(state)
 }
@@ -177,18 +178,6 @@ async fn auth(State(state): State<Arc<AppState>>, headers: HeaderMap, req: Reque
         }
     }
     next.run(req).await
-}
-
-/// Marks the connection busy while an authenticated request is handled, so the idle timeout
-/// does not close it under a long handler (see [`crate::connections`]).
-async fn busy(req: Request, next: Next) -> Response {
-    let guard = req
-        .extensions()
-        .get::<axum::extract::ConnectInfo<crate::connections::Busy>>()
-        .map(|b| b.0.enter());
-    let response = next.run(req).await;
-    drop(guard);
-    response
 }
 
 fn parse_id(s: &str) -> ApiResult<u64> {
@@ -248,9 +237,9 @@ async fn small_field(
 /// Streams the bundle field to `path`; returns its SHA-256.
 async fn bundle_to_disk(field: &mut axum::extract::multipart::Field<'_>, path: &FsPath) -> ApiResult<String> {
     if let Some(dir) = path.parent() {
-        tokio::fs::create_dir_all(dir).await.map_err(ApiError::internal)?;
+        tokio::fs::create_dir_all(dir).await.map_err(storage_error)?;
     }
-    let mut file = tokio::fs::File::create(path).await.map_err(ApiError::internal)?;
+    let mut file = tokio::fs::File::create(path).await.map_err(storage_error)?;
     let mut hash = Sha256::new();
     while let Some(chunk) = field
         .chunk()
@@ -258,9 +247,9 @@ async fn bundle_to_disk(field: &mut axum::extract::multipart::Field<'_>, path: &
         .map_err(|e| ApiError::new(e.status(), e.body_text()))?
     {
         hash.update(&chunk);
-        file.write_all(&chunk).await.map_err(ApiError::internal)?;
+        file.write_all(&chunk).await.map_err(storage_error)?;
     }
-    file.sync_all().await.map_err(ApiError::internal)?;
+    file.sync_all().await.map_err(storage_error)?;
     Ok(hex::encode(hash.finalize()))
 }
 
@@ -277,7 +266,7 @@ async fn submit(State(state): State<Arc<AppState>>, req: Request) -> ApiResult<R
 async fn receive_and_accept(state: &Arc<AppState>, req: Request, scratch: &FsPath) -> ApiResult<Response> {
     // An upload slot while the body is read; the scene check that follows waits for its own
     // turn without holding one, so slow checks never hold up workers' results.
-    let slot = state.upload_slots.acquire().await.map_err(ApiError::internal)?;
+    let slot = state.bundle_slots.acquire().await.map_err(ApiError::internal)?;
     let mut multipart = Multipart::from_request(req, state)
         .await
         .map_err(|e| ApiError::new(e.status(), e.body_text()))?;
@@ -328,7 +317,9 @@ fn accept_bundle(
     let reader = std::fs::File::open(archive).map_err(ApiError::internal)?;
     let files = photonfarm::bundle::unpack_from(std::io::BufReader::new(reader), &files_dir, &limits.bundle)
         .map_err(|e| match e {
-            BundleError::Io(..) => ApiError::internal(e),
+            BundleError::Io(what, io) => {
+                storage_error(StorageFailure(Some(io.kind()), format!("{what}: {io}")))
+            }
             BundleError::TooLarge(_) => too_large(e.to_string()),
             _ => ApiError::new(StatusCode::BAD_REQUEST, e.to_string()),
         })?;
@@ -404,7 +395,7 @@ fn accept_bundle(
     let sum = Accumulator::empty(checked.width, checked.height, window);
     let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
     if !stored.exists() {
-        std::fs::rename(archive, &stored).map_err(ApiError::internal)?;
+        std::fs::rename(archive, &stored).map_err(storage_error)?;
         if let Some(parent) = stored.parent()
             && let Ok(d) = std::fs::File::open(parent)
         {
@@ -572,8 +563,8 @@ async fn heartbeat(
 }
 
 /// `PUT /api/leases/{id}/result`: checked against the lease's expected size before it is
-/// read, decoded and written to disk outside the lock, then counted, then merged into the
-/// job's sum under the job's own lock.
+/// read, streamed to a file of the lease's own, decoded under a decoding slot outside the
+/// lock, then counted, then merged into the job's sum under the job's own lock.
 async fn result(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
@@ -586,33 +577,127 @@ async fn result(
         .map_err(|e| ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, e.to_string()))?;
     // Refuse a dead lease, or one of another worker, before reading a large body.
     let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
+    let _receiving = Receiving::claim(&state, id)?;
     let max = max_encoded_batch(expected.width, expected.height);
-    let (body, _slot) = read_result_body(&headers, req, encoding, max, &state.upload_slots)
+    let batch = StoredBatch {
+        start: expected.start,
+        end: expected.end,
+        lease: id,
+    };
+    let part = state.layout.received_path(expected.job, batch);
+    tokio::fs::create_dir_all(state.layout.job_dir(expected.job))
         .await
-        .map_err(|e| match e {
+        .map_err(storage_error)?;
+    let outcome = match receive_result_to(&headers, req, encoding, max, &part).await {
+        Ok(len) => {
+            // A slot only now that the body is here: a stalled body never holds one.
+            let slot = state.result_slots.acquire().await.map_err(ApiError::internal)?;
+            let st = state.clone();
+            let out = blocking(move || store_result(&st, id, &key, expected, encoding, len)).await;
+            drop(slot);
+            out
+        }
+        Err(e) => Err(match e {
             BodyError::TooLarge(declared) => too_large(format!(
                 "a result for lease {id} ({}x{}) is at most {max} bytes; this one is {}",
                 expected.width,
                 expected.height,
                 declared.map_or("larger".to_string(), |n| n.to_string())
             )),
+            BodyError::Stalled => ApiError::new(
+                StatusCode::REQUEST_TIMEOUT,
+                format!("the result for lease {id} stalled for longer than --body-timeout"),
+            ),
+            BodyError::Broken(m) => {
+                ApiError::new(StatusCode::BAD_REQUEST, format!("reading the result: {m}"))
+            }
+            BodyError::Io(e) => storage_error(e),
             BodyError::Closed(e) => ApiError::internal(e),
-        })?;
-    let st = state.clone();
-    blocking(move || store_result(&st, id, &key, expected, encoding, body)).await?;
+        }),
+    };
+    // Kept under the batch's name if it counted; otherwise never anywhere.
+    let _ = tokio::fs::remove_file(&part).await;
+    outcome?;
     Ok(Json(json!({ "accepted": true })).into_response())
 }
 
-/// Decodes, checks and stores a result, counts it, and merges it (writing any checkpoint).
+/// A lease's result being received: one at a time per lease, so that two uploads of one lease
+/// never write one file.
+struct Receiving<'a> {
+    state: &'a AppState,
+    lease: u64,
+}
+
+impl<'a> Receiving<'a> {
+    fn claim(state: &'a AppState, lease: u64) -> ApiResult<Receiving<'a>> {
+        let mut under_way = state.receiving.lock().unwrap_or_else(|p| p.into_inner());
+        if !under_way.insert(lease) {
+            return Err(ApiError::new(
+                StatusCode::CONFLICT,
+                format!("a result for lease {lease} is being received on another request"),
+            ));
+        }
+        Ok(Receiving { state, lease })
+    }
+}
+
+impl Drop for Receiving<'_> {
+    fn drop(&mut self) {
+        let mut under_way = self.state.receiving.lock().unwrap_or_else(|p| p.into_inner());
+        under_way.remove(&self.lease);
+    }
+}
+
+/// A storage failure: out of space is the operator's to fix and the client's to retry later
+/// (507), anything else the coordinator's (500, details logged).
+fn storage_error(e: impl Into<StorageFailure>) -> ApiError {
+    let StorageFailure(kind, what) = e.into();
+    if kind == Some(std::io::ErrorKind::StorageFull) || kind == Some(std::io::ErrorKind::QuotaExceeded) {
+        tracing::error!("storage full: {what}");
+        ApiError::new(
+            StatusCode::INSUFFICIENT_STORAGE,
+            "the coordinator's data disk is full; try again later",
+        )
+    } else {
+        ApiError::internal(format!("storage: {what}"))
+    }
+}
+
+/// What [`storage_error`] needs of an error: its I/O kind, if any, and its text.
+struct StorageFailure(Option<std::io::ErrorKind>, String);
+
+impl From<std::io::Error> for StorageFailure {
+    fn from(e: std::io::Error) -> StorageFailure {
+        StorageFailure(Some(e.kind()), e.to_string())
+    }
+}
+
+impl From<crate::store::StoreError> for StorageFailure {
+    fn from(e: crate::store::StoreError) -> StorageFailure {
+        let kind = match &e {
+            crate::store::StoreError::Io(_, io) => Some(io.kind()),
+            _ => None,
+        };
+        StorageFailure(kind, e.to_string())
+    }
+}
+
+/// Decodes, checks and keeps a received result, counts it, and merges it (writing any
+/// checkpoint).
 fn store_result(
     state: &AppState,
     id: u64,
     key: &str,
     expected: crate::farm::Expected,
     encoding: Encoding,
-    body: Bytes,
+    len: u64,
 ) -> ApiResult<()> {
-    let len = body.len() as u64;
+    let batch = StoredBatch {
+        start: expected.start,
+        end: expected.end,
+        lease: id,
+    };
+    let body = std::fs::read(state.layout.received_path(expected.job, batch)).map_err(storage_error)?;
     // Odd passes in [start, end): those the odd-pass sample, if sent, must hold.
     let odd_passes = expected.end / 2 - expected.start / 2;
     let max = max_encoded_batch(expected.width, expected.height);
@@ -629,6 +714,7 @@ fn store_result(
     };
     let decoded = decode_result(&plain, expected.width, expected.height);
     drop(plain);
+    drop(body);
     let (sum, odd) = match decoded {
         Ok(r)
             if (r.sum.width, r.sum.height) == (expected.width, expected.height)
@@ -663,18 +749,12 @@ fn store_result(
             return Err(ApiError::from(FarmError::BadResult(msg)));
         }
     };
-    // The body is the batch's encoding: stored as received (compressed or not), then dropped.
-    // Under a name of this lease's own; only the commit's row makes it count.
-    let batch = StoredBatch {
-        start: expected.start,
-        end: expected.end,
-        lease: id,
-    };
+    // The body is the batch's encoding: kept as received (compressed or not), under a name of
+    // this lease's own; only the commit's row makes it count.
     state
         .layout
-        .write_batch_bytes(expected.job, batch, &body)
-        .map_err(|e| ApiError::internal(format!("storage: {e}")))?;
-    drop(body);
+        .keep_received(expected.job, batch)
+        .map_err(storage_error)?;
     let Committed {
         job,
         sum: job_sum,

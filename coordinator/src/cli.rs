@@ -388,15 +388,13 @@ pub struct ServeArgs {
     /// Uploads (bundles and results) read at the same time.
     #[arg(long, default_value_t = 4)]
     pub max_uploads: usize,
-    /// Open connections at most; more wait to be accepted.
-    #[arg(long, default_value_t = 256)]
-    pub max_connections: usize,
-    /// Seconds of silence after which a connection is closed.
-    #[arg(long, default_value_t = 60)]
-    pub idle_timeout: u64,
-    /// Seconds a request head may take to arrive, from its first byte.
-    #[arg(long, default_value_t = 10)]
-    pub header_timeout: u64,
+    /// Connections and their timeouts.
+    #[command(flatten)]
+    pub connections: crate::serving::ConnectionArgs,
+    /// Submitted scenes checked at the same time (each loads in a child process, taking up to
+    /// about 30 times its files' size, bounded by --max-geometry-mb).
+    #[arg(long, default_value_t = 2)]
+    pub max_scene_checks: usize,
     /// Seconds a submitted scene may take to load (in a child process, killed beyond).
     #[arg(long, default_value_t = 120)]
     pub scene_check_timeout: u64,
@@ -437,6 +435,12 @@ pub struct RelayArgs {
     /// Seconds without a heartbeat after which a local worker's part goes to another one.
     #[arg(long, default_value_t = 30.0)]
     pub lease_timeout: f64,
+    /// Local workers' results read at the same time (each may be a whole image's sums).
+    #[arg(long, default_value_t = 4)]
+    pub max_uploads: usize,
+    /// Connections and their timeouts, as for `coordinator serve`.
+    #[command(flatten)]
+    pub connections: crate::serving::ConnectionArgs,
 }
 
 /// `coordinator loadgen`.

@@ -22,6 +22,7 @@ pub mod scene_check;
 pub mod scheduler;
 pub mod serve_command;
 pub mod service;
+pub mod serving;
 pub mod store;
 pub mod synthetic;
 pub mod web;

@@ -23,9 +23,8 @@ fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
     a.bundle.max_files = args.max_bundle_files;
     a.bundle.max_bytes = args.max_bundle_mb.map_or(a.bundle.max_bytes, mib);
     a.max_uploads = args.max_uploads;
-    a.max_connections = args.max_connections;
-    a.idle_timeout_s = args.idle_timeout;
-    a.header_timeout_s = args.header_timeout;
+    a.max_scene_checks = args.max_scene_checks;
+    a.serving = args.connections.checked().map_err(anyhow::Error::msg)?;
     a.scene_check_timeout_s = args.scene_check_timeout;
     let zero = [
         ("--max-pixels", a.job.max_pixels),
@@ -34,9 +33,7 @@ fn admission_of(args: &ServeArgs) -> anyhow::Result<Admission> {
         ("--max-bundle-files", a.bundle.max_files as u64),
         ("--max-bundle-mb", a.bundle.max_bytes),
         ("--max-uploads", a.max_uploads as u64),
-        ("--max-connections", a.max_connections as u64),
-        ("--idle-timeout", a.idle_timeout_s),
-        ("--header-timeout", a.header_timeout_s),
+        ("--max-scene-checks", a.max_scene_checks as u64),
         ("--scene-check-timeout", a.scene_check_timeout_s),
     ];
     if let Some((flag, _)) = zero.iter().find(|(_, v)| *v == 0) {

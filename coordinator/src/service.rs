@@ -13,7 +13,6 @@ use tokio::sync::Semaphore;
 
 use crate::admission::Admission;
 use crate::api::{AppState, Tokens, router};
-use crate::connections::BoundedListener;
 use crate::farm::{Farm, FarmConfig};
 use crate::store::Store;
 
@@ -54,7 +53,9 @@ pub async fn run(
         admission,
         checker: config.checker.clone(),
         uploads: AtomicU64::new(0),
-        upload_slots: Semaphore::new(admission.max_uploads.max(1)),
+        bundle_slots: Semaphore::new(admission.max_uploads.max(1)),
+        result_slots: Semaphore::new(admission.max_uploads.max(1)),
+        receiving: Default::default(),
         scene_checks: Semaphore::new(admission.max_scene_checks.max(1)),
         metrics: Default::default(),
     });
@@ -85,18 +86,7 @@ pub async fn run(
     );
     // On standard output, for scripts (and tests) that bind port 0.
     println!("listening on http://{addr}");
-    let listener = BoundedListener::new(
-        listener,
-        admission.max_connections,
-        Duration::from_secs(admission.idle_timeout_s.max(1)),
-        Duration::from_secs(admission.header_timeout_s.max(1)),
-    );
-    axum::serve(
-        listener,
-        router(state).into_make_service_with_connect_info::<crate::connections::Busy>(),
-    )
-    .with_graceful_shutdown(shutdown)
-    .await?;
+    crate::serving::serve(listener, router(state), admission.serving, shutdown).await?;
     expiry.abort();
     Ok(())
 }

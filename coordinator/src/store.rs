@@ -212,9 +212,30 @@ impl Layout {
         self.job_dir(job).join(name)
     }
 
-    /// Stores an encoded batch result durably, before its row is recorded under the lock.
+    /// Where a batch's result is received, before it is decoded and checked: its lease's own
+    /// name (one upload per lease at a time), which never counts.
+    pub fn received_path(&self, job: u64, b: StoredBatch) -> PathBuf {
+        let mut name = self.batch_path(job, b).into_os_string();
+        name.push(".part");
+        PathBuf::from(name)
+    }
+
+    /// Stores an encoded batch result durably, as a received one is kept (for tests that play
+    /// a worker without HTTP).
+    #[cfg(test)]
     pub fn write_batch_bytes(&self, job: u64, b: StoredBatch, encoded: &[u8]) -> Result<(), StoreError> {
         write_durably_as(&self.batch_path(job, b), encoded, b.lease)
+    }
+
+    /// Makes a received (and already durable) result the stored batch, before its row is
+    /// recorded under the lock.
+    pub fn keep_received(&self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
+        let path = self.batch_path(job, b);
+        std::fs::rename(self.received_path(job, b), &path).map_err(io(&path))?;
+        if let Ok(d) = std::fs::File::open(self.job_dir(job)) {
+            let _ = d.sync_all();
+        }
+        Ok(())
     }
 
     /// Stores a job's prefix (passes [0, N) summed) durably, with its odd passes' sample if
@@ -516,7 +537,7 @@ impl Store {
         Ok(rows.collect::<Result<_, _>>()?)
     }
 
-    /// Records a batch result whose file [`Layout::write_batch_bytes`] has stored: from
+    /// Records a batch result whose file [`Layout::keep_received`] has stored: from
     /// here on it counts.
     pub fn record_batch(&mut self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
         self.db.execute(

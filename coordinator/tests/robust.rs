@@ -554,6 +554,37 @@ async fn a_trickling_request_head_is_cut_off() {
     }
 }
 
+/// Scene checks run side by side (--max-scene-checks, 2 by default): a small job submitted
+/// while a slow scene (about 4 s to load) is checked is created at once. One at a time, it used
+/// to wait for the slow one (49.6 s in the probe).
+#[tokio::test(flavor = "multi_thread")]
+async fn a_slow_scene_check_does_not_hold_up_other_submissions() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(&dir.path().join("data"), "127.0.0.1:0", &[]);
+    let slow = {
+        let api = Api::new(&url);
+        let text = slow_scene(4.0);
+        tokio::spawn(async move {
+            let (s, v) = api.submit(tar_of(&[("s.xml", &text)]), "{}").await;
+            assert_eq!(s, StatusCode::CREATED, "{v}");
+            Instant::now()
+        })
+    };
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let api = Api::new(&url);
+    let start = Instant::now();
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    let small_done = Instant::now();
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+    let slow_done = slow.await.unwrap();
+    eprintln!(
+        "the small job took {:?}; the slow one ended {:?} after it",
+        small_done - start,
+        slow_done.saturating_duration_since(small_done)
+    );
+    assert!(small_done < slow_done, "the small job waited for the slow check");
+}
+
 /// Loading a scene runs in a child process with a time limit: a scene that takes too long to
 /// load (about 3 s of rough plastics for a 1 s limit) is refused, and the coordinator
 /// goes on serving.

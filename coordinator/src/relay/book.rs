@@ -101,6 +101,8 @@ struct Batch {
     failures: u32,
     /// Complete: being forwarded upstream (still heartbeated until then).
     forwarding: bool,
+    /// When its upstream lease is next heartbeated.
+    beat_at: Millis,
 }
 
 struct Part {
@@ -160,9 +162,10 @@ impl Book {
         self.seen.len() as u32
     }
 
-    /// Adds a batch leased upstream.
-    pub fn add_batch(&mut self, lease: Lease) {
+    /// Adds a batch leased upstream at `now`.
+    pub fn add_batch(&mut self, lease: Lease, now: Millis) {
         let len = lease.end - lease.start;
+        let beat_at = now + beat_every(&lease);
         self.batches.insert(
             lease.lease_id,
             Batch {
@@ -171,6 +174,7 @@ impl Book {
                 lease,
                 failures: 0,
                 forwarding: false,
+                beat_at,
             },
         );
     }
@@ -321,13 +325,33 @@ impl Book {
         Some(b.lease)
     }
 
-    /// The upstream leases held (id, key), to heartbeat.
-    pub fn upstream(&self) -> Vec<(u64, String)> {
+    /// The upstream leases (id, key) due for a heartbeat at `now`, each then due again after
+    /// its interval.
+    pub fn due(&mut self, now: Millis) -> Vec<(u64, String)> {
         self.batches
-            .values()
-            .map(|b| (b.lease.lease_id, b.lease.key.clone()))
+            .values_mut()
+            .filter(|b| b.beat_at <= now)
+            .map(|b| {
+                b.beat_at = now + beat_every(&b.lease);
+                (b.lease.lease_id, b.lease.key.clone())
+            })
             .collect()
     }
+}
+
+/// How often an upstream lease is heartbeated: as often as the upstream asks, and at least
+/// three times per deadline (an upstream that does not say is heartbeated every 5 s, within
+/// the coordinator's default 30 s).
+fn beat_every(lease: &Lease) -> Millis {
+    let asked = match lease.heartbeat_ms {
+        0 => 5000,
+        ms => ms,
+    };
+    let within = match lease.deadline_ms {
+        0 => asked,
+        ms => ms / 3,
+    };
+    asked.min(within).max(10)
 }
 
 #[cfg(test)]
@@ -378,7 +402,7 @@ mod tests {
         for w in ["a", "b", "c"] {
             book.asked(w, 0);
         }
-        book.add_batch(upstream(7, 10, 17));
+        book.add_batch(upstream(7, 10, 17), 0);
         let mut parts = Vec::new();
         while let Some(l) = book.take(format!("k{}", parts.len()), 0) {
             assert_eq!(l.radii[0][0], l.start as f32, "radii follow the part");
@@ -411,7 +435,7 @@ mod tests {
     fn expired_and_failed_parts_go_to_other_workers_and_three_failures_give_up() {
         let mut book = Book::new(1000);
         book.asked("a", 0);
-        book.add_batch(upstream(1, 0, 4));
+        book.add_batch(upstream(1, 0, 4), 0);
         let a = book.take("ka".into(), 0).unwrap();
         assert_eq!((a.start, a.end), (0, 4));
         assert!(book.take("kb".into(), 0).is_none());
@@ -428,15 +452,36 @@ mod tests {
             let given_up = book.release(p.lease_id, &p.key, true).unwrap();
             assert_eq!(given_up.is_some(), k == 2);
         }
-        assert!(book.upstream().is_empty());
+        assert!(book.due(u64::MAX).is_empty());
         // A batch lost upstream voids its parts.
-        book.add_batch(upstream(2, 0, 2));
+        book.add_batch(upstream(2, 0, 2), 0);
         let p = book.take("k".into(), 0).unwrap();
         book.finish(2);
         assert_eq!(
             book.heartbeat(p.lease_id, "k", 1),
             Err(PartError::NotActive(p.lease_id))
         );
+    }
+
+    /// Upstream leases are heartbeated as often as their upstream asks, whatever the relay's
+    /// own timeout: a coordinator with a 3 s lease timeout used to lose a relay's batches,
+    /// heartbeated every 5 s.
+    #[test]
+    fn upstream_leases_are_heartbeated_as_often_as_the_upstream_asks() {
+        let mut book = Book::new(30_000);
+        book.add_batch(upstream(1, 0, 4), 0);
+        assert!(book.due(249).is_empty());
+        assert_eq!(book.due(250), vec![(1, "up".to_string())]);
+        assert!(book.due(499).is_empty());
+        assert_eq!(book.due(500).len(), 1);
+        // An upstream that asks for rarer heartbeats than its deadline allows is heartbeated
+        // three times per deadline.
+        let mut lax = upstream(2, 0, 4);
+        lax.heartbeat_ms = 10_000;
+        lax.deadline_ms = 3000;
+        book.add_batch(lax, 1000);
+        assert!(book.due(1999).iter().all(|(id, _)| *id != 2));
+        assert!(book.due(2000).iter().any(|(id, _)| *id == 2));
     }
 
     #[test]

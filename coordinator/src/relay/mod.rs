@@ -36,6 +36,7 @@ use sha2::{Digest, Sha256};
 
 use crate::cli::RelayArgs;
 use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
+use crate::serving::ServingLimits;
 use book::{Book, PartError};
 
 /// Shared by the relay's handlers and loops.
@@ -51,6 +52,7 @@ pub struct Relay {
     leasing: tokio::sync::Mutex<()>,
     /// Local results read at once (each may be a whole image's sums).
     uploads: tokio::sync::Semaphore,
+    serving: ServingLimits,
 }
 
 /// Relay settings.
@@ -66,6 +68,10 @@ pub struct RelayConfig {
     pub name: String,
     /// A part without a heartbeat for this long goes to another local worker.
     pub lease_timeout_ms: u64,
+    /// Local results read at once.
+    pub max_uploads: usize,
+    /// What local clients are allowed (as the coordinator's).
+    pub serving: ServingLimits,
 }
 
 struct RelayError(StatusCode, String);
@@ -108,7 +114,8 @@ impl Relay {
                 .timeout(Duration::from_secs(600))
                 .build()?,
             leasing: tokio::sync::Mutex::new(()),
-            uploads: tokio::sync::Semaphore::new(4),
+            uploads: tokio::sync::Semaphore::new(config.max_uploads.max(1)),
+            serving: config.serving,
         }))
     }
 
@@ -140,15 +147,20 @@ impl Relay {
 }
 
 /// The relay's routes: the workers' part of the coordinator's API (docs/api.md).
+/// Behind the coordinator's limits ([`crate::serving`]): JSON bodies are small, a result is
+/// bounded by its lease in the handler.
 pub fn router(relay: Arc<Relay>) -> Router {
-    Router::new()
+    let routes = Router::new()
         .route("/healthz", get(|| async { Json(json!({ "status": "ok" })) }))
         .route("/api/lease", post(lease))
         .route("/api/leases/{id}/heartbeat", post(heartbeat))
-        .route("/api/leases/{id}/result", put(result))
+        .route(
+            "/api/leases/{id}/result",
+            put(result).layer(axum::extract::DefaultBodyLimit::disable()),
+        )
         .route("/api/leases/{id}/release", post(release))
-        .route("/api/bundles/{hash}", get(bundle))
-        .layer(axum::extract::DefaultBodyLimit::disable())
+        .route("/api/bundles/{hash}", get(bundle));
+    crate::serving::guarded(routes, &relay.serving)
         .layer(axum::middleware::from_fn_with_state(relay.clone(), auth))
         .with_state(relay)
 }
@@ -170,13 +182,22 @@ async fn auth(State(relay): State<Arc<Relay>>, req: Request, next: axum::middlew
     next.run(req).await
 }
 
+/// A JSON body, or the body limit's (or the body timeout's) error.
+async fn json_bytes(req: Request) -> RelayResult<Bytes> {
+    use axum::extract::FromRequest;
+    Bytes::from_request(req, &())
+        .await
+        .map_err(|e| RelayError(e.status(), e.body_text()))
+}
+
 fn parse_id(s: &str) -> RelayResult<u64> {
     s.parse()
         .map_err(|_| RelayError(StatusCode::NOT_FOUND, format!("\"{s}\" is not an id")))
 }
 
 /// `POST /api/lease`: a part of a batch held, or of a new batch leased upstream.
-async fn lease(State(relay): State<Arc<Relay>>, body: Bytes) -> RelayResult<Response> {
+async fn lease(State(relay): State<Arc<Relay>>, req: Request) -> RelayResult<Response> {
+    let body = json_bytes(req).await?;
     let req: LeaseRequest = serde_json::from_slice(&body)
         .map_err(|e| RelayError(StatusCode::BAD_REQUEST, format!("malformed JSON: {e}")))?;
     let now = relay.now();
@@ -211,8 +232,9 @@ async fn lease(State(relay): State<Arc<Relay>>, body: Bytes) -> RelayResult<Resp
                 end = up.end,
                 "leased upstream"
             );
+            let now = relay.now();
             let mut book = relay.book();
-            book.add_batch(up);
+            book.add_batch(up, now);
             match book.take(relay.new_key(), relay.now()) {
                 Some(l) => Ok(Json(l).into_response()),
                 None => Ok(StatusCode::NO_CONTENT.into_response()),
@@ -239,9 +261,10 @@ async fn release(
     State(relay): State<Arc<Relay>>,
     Path(id): Path<String>,
     headers: HeaderMap,
-    body: Bytes,
+    req: Request,
 ) -> RelayResult<Response> {
     let id = parse_id(&id)?;
+    let body = json_bytes(req).await?;
     let r: Release = serde_json::from_slice(&body)
         .map_err(|e| RelayError(StatusCode::BAD_REQUEST, format!("malformed JSON: {e}")))?;
     let given_up = relay
@@ -297,6 +320,12 @@ async fn result(
                 StatusCode::PAYLOAD_TOO_LARGE,
                 format!("a result for lease {id} is at most {max} bytes"),
             ),
+            BodyError::Stalled => RelayError(
+                StatusCode::REQUEST_TIMEOUT,
+                format!("the result for lease {id} stalled for longer than --body-timeout"),
+            ),
+            BodyError::Broken(m) => RelayError(StatusCode::BAD_REQUEST, format!("reading the result: {m}")),
+            BodyError::Io(e) => bad_gateway(e),
             BodyError::Closed(e) => bad_gateway(e),
         })?;
     let decoded = tokio::task::spawn_blocking(move || {
@@ -440,18 +469,22 @@ async fn bundle(State(relay): State<Arc<Relay>>, Path(hash): Path<String>) -> Re
         .into_response())
 }
 
-/// Heartbeats every upstream batch held; a batch the upstream no longer holds is forgotten
-/// (its local workers learn it at their next heartbeat). Also expires silent local parts.
-async fn upkeep(relay: Arc<Relay>, every: Duration) {
-    let mut tick = tokio::time::interval(every);
+/// Heartbeats every upstream batch held as often as its lease asks (its `heartbeat_ms`, so a
+/// coordinator with a short lease timeout is heartbeated in time); a batch the upstream no
+/// longer holds is forgotten (its local workers learn it at their next heartbeat). Also
+/// expires silent local parts.
+async fn upkeep(relay: Arc<Relay>) {
+    let mut tick = tokio::time::interval(UPKEEP_TICK);
     loop {
         tick.tick().await;
-        relay.book().expire(relay.now());
-        let held = relay.book().upstream();
-        for (id, key) in held {
+        let now = relay.now();
+        relay.book().expire(now);
+        let due = relay.book().due(now);
+        for (id, key) in due {
             let r = relay
                 .up(reqwest::Method::POST, &format!("/api/leases/{id}/heartbeat"))
                 .header(LEASE_KEY_HEADER, &key)
+                .timeout(Duration::from_secs(10))
                 .send()
                 .await;
             if let Ok(r) = r
@@ -467,18 +500,19 @@ async fn upkeep(relay: Arc<Relay>, every: Duration) {
     }
 }
 
+/// How often the relay looks for heartbeats due and local parts expired.
+const UPKEEP_TICK: Duration = Duration::from_millis(100);
+
 /// Serves local workers on `listener` until `shutdown`.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     relay: Arc<Relay>,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
-    // Upstream leases are heartbeated well within the coordinator's 30 s default timeout.
-    let keep = tokio::spawn(upkeep(relay.clone(), Duration::from_secs(5)));
+    let keep = tokio::spawn(upkeep(relay.clone()));
     println!("listening on http://{}", listener.local_addr()?);
-    axum::serve(listener, router(relay))
-        .with_graceful_shutdown(shutdown)
-        .await?;
+    let serving = relay.serving;
+    crate::serving::serve(listener, router(relay), serving, shutdown).await?;
     keep.abort();
     Ok(())
 }
@@ -504,6 +538,8 @@ pub fn run(args: &RelayArgs) -> anyhow::Result<()> {
         token,
         name,
         lease_timeout_ms: (args.lease_timeout * 1000.0) as u64,
+        max_uploads: args.max_uploads,
+        serving: args.connections.checked().map_err(anyhow::Error::msg)?,
     })?;
     let rt = tokio::runtime::Runtime::new().context("cannot start the async runtime")?;
     rt.block_on(async {
