@@ -420,6 +420,14 @@ impl Store {
                 id as i64
             ],
         )?;
+        // Its folder now, not at its first batch: folders are what keep ids from being reused
+        // when the database is lost (see `id_floor`), and a job lost with its database before
+        // any batch arrived had none.
+        let folder = self.layout.job_dir(id);
+        std::fs::create_dir_all(&folder).map_err(io(&folder))?;
+        if let Ok(d) = std::fs::File::open(self.layout.dir.join("jobs")) {
+            let _ = d.sync_all();
+        }
         Ok(id)
     }
 
@@ -640,5 +648,25 @@ mod tests {
         write_durably(&out, b"image").unwrap();
         assert_eq!(std::fs::read(&out).unwrap(), b"image");
         assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
+    }
+
+    /// docs/api.md promises job ids are never reused, even if the database is lost: a job
+    /// lost with its database before its first batch had no folder, so its id came back.
+    #[test]
+    fn job_ids_are_not_reused_after_the_database_is_lost() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut store = Store::open(dir.path()).unwrap();
+        let insert = |s: &mut Store| s.insert_job(0, "{}", "{}", "s.xml", "b", 4, 4, 2, 2).unwrap();
+        assert_eq!(insert(&mut store), 1);
+        drop(store);
+        for f in [
+            "photonfarm.sqlite",
+            "photonfarm.sqlite-wal",
+            "photonfarm.sqlite-shm",
+        ] {
+            let _ = std::fs::remove_file(dir.path().join(f));
+        }
+        let mut store = Store::open(dir.path()).unwrap();
+        assert_eq!(insert(&mut store), 2);
     }
 }
