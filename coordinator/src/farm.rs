@@ -422,8 +422,7 @@ impl Farm {
         let now = self.now();
         let key = self.new_key();
         self.roster.asked(&req.worker, req.threads);
-        let renderers = req.renderers.unwrap_or(1).max(1);
-        let granted = self.scheduler.lease_for(&req.worker, renderers, now);
+        let granted = self.scheduler.lease_for(&req.worker, req.renderers, now);
         // Looking for work may fail a job that no worker may take any more.
         self.save_changes()?;
         let Some(g) = granted else {

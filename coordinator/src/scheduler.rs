@@ -13,7 +13,13 @@
 //!   three workers fails the job. A lease that expires (its worker crashed or hung) counts as
 //!   a failure of its worker, so a batch that kills every worker fails its job instead of
 //!   being handed out forever; and a range that every worker seen lately is barred from fails
-//!   the job with a message instead of waiting for a worker that may never come.
+//!   the job with a message instead of waiting for a worker that may never come. A relay's
+//!   lease that expires is not a failure: a relay renders nothing, so its death says nothing
+//!   of the batch (the relay reports its workers' failures itself, with a release); nor is a
+//!   lease restored after a restart, whose worker may never have heard of the coordinator again.
+//! - Jobs take turns: each lease goes to the next job after the one that had the last lease
+//!   (round robin over the jobs with work), so a long job submitted first does not starve
+//!   the jobs after it. Each job still gets its passes in increasing order.
 //! - Batch sizes aim at a target duration from each worker's measured rate on the job. The
 //!   target grows with the number of workers present so that their results together stay
 //!   within what the coordinator absorbs: target = max(`target_batch_ms`, workers × image
@@ -131,6 +137,10 @@ struct LeaseInfo {
     start: u64,
     end: u64,
     worker: String,
+    /// Its expiry says nothing of the batch, so it is not a failure: granted to a relay (which
+    /// renders nothing itself), or restored after a restart (its worker may never have heard
+    /// of the coordinator again).
+    blameless: bool,
     issued: Millis,
     deadline: Millis,
     /// When its result started to arrive: the worker's speed is measured to then, not to
@@ -168,6 +178,9 @@ pub struct Scheduler {
     /// Workers that asked for work, with the time they last asked: the farm's workers as far
     /// as the scheduler can know them.
     seen: HashMap<String, Millis>,
+    /// The job whose turn is next (round robin): the first job from this id on is offered the
+    /// next lease first.
+    turn: u64,
 }
 
 /// Failures of one range on one worker before that worker is no longer given it.
@@ -185,6 +198,7 @@ impl Scheduler {
             leases: BTreeMap::new(),
             next_lease: first_lease_id,
             seen: HashMap::new(),
+            turn: 0,
         }
     }
 
@@ -252,19 +266,25 @@ impl Scheduler {
 
     /// Grants the next batch to `worker`, from the oldest job with work it may take.
     pub fn lease(&mut self, worker: &str, now: Millis) -> Option<Grant> {
-        self.lease_for(worker, 1, now)
+        self.lease_for(worker, None, now)
     }
 
-    /// [`Scheduler::lease`] for a client that renders on `renderers` machines (a relay): its
-    /// first batch on a job has a pass for each.
-    pub fn lease_for(&mut self, worker: &str, renderers: u32, now: Millis) -> Option<Grant> {
+    /// [`Scheduler::lease`] for a client that is a relay for `renderers` machines (None: a
+    /// worker): its first batch on a job has a pass for each.
+    pub fn lease_for(&mut self, worker: &str, renderers: Option<u32>, now: Millis) -> Option<Grant> {
         let config = self.config;
         self.seen.insert(worker.to_string(), now);
         // Workers that asked within two lease timeouts count as present.
         let recent = now.saturating_sub(config.lease_timeout_ms.saturating_mul(2));
         self.seen.retain(|_, &mut t| t >= recent);
         let clients = self.seen.len() as u64;
-        for (&job_id, job) in self.jobs.iter_mut() {
+        let order: Vec<u64> = (self.jobs.range(self.turn..).map(|(&id, _)| id))
+            .chain(self.jobs.range(..self.turn).map(|(&id, _)| id))
+            .collect();
+        let relayed = renderers.is_some();
+        let renderers = renderers.unwrap_or(1).max(1);
+        for job_id in order {
+            let job = self.jobs.get_mut(&job_id).expect("listed above");
             if job.state.is_final() {
                 continue;
             }
@@ -284,11 +304,13 @@ impl Scheduler {
                     start: range.0,
                     end: range.1,
                     worker: worker.to_string(),
+                    blameless: relayed,
                     issued: now,
                     deadline: now + config.lease_timeout_ms,
                     arrived: None,
                 },
             );
+            self.turn = job_id + 1;
             return Some(Grant {
                 lease_id,
                 job_id,
@@ -331,6 +353,7 @@ impl Scheduler {
                 start: grant.start,
                 end: grant.end,
                 worker: worker.to_string(),
+                blameless: true,
                 issued: deadline.saturating_sub(self.config.lease_timeout_ms),
                 deadline,
                 arrived: None,
@@ -435,12 +458,12 @@ impl Scheduler {
         expired
             .into_iter()
             .map(|id| {
-                let job = self.leases[&id].job;
-                self.release(
-                    id,
-                    Some("the lease expired without a heartbeat (the worker crashed, hung or lost the network)"),
-                )
-                .expect("listed above");
+                let lease = &self.leases[&id];
+                let job = lease.job;
+                let error = (!lease.blameless).then_some(
+                    "the lease expired without a heartbeat (the worker crashed, hung or lost the network)",
+                );
+                self.release(id, error).expect("listed above");
                 (id, job)
             })
             .collect()
@@ -751,6 +774,48 @@ mod tests {
         assert!(msg.unwrap().contains("every available worker (only)"));
     }
 
+    /// A relay renders nothing itself, so its lease expiring (the relay died) is no failure of
+    /// the batch: a relay with a fixed name that died three times on one range used to fail
+    /// the job, barred from the range and the only client present.
+    #[test]
+    fn a_relay_that_dies_never_fails_the_job() {
+        let mut s = sched();
+        s.add_job(1, 10, 10, 0, &[], JobState::Queued);
+        let mut t = 0;
+        for _ in 0..4 {
+            let g = s.lease_for("relay-a", Some(4), t).unwrap();
+            assert_eq!(g.start, 0, "the same range again");
+            t += 1001;
+            assert_eq!(s.expire(t).len(), 1);
+        }
+        assert_eq!(s.status(1).unwrap().0, JobState::Running);
+        // A worker's expiry still counts.
+        for w in ["a", "b", "c"] {
+            s.lease(w, t).unwrap();
+            t += 1001;
+            s.expire(t);
+        }
+        assert_eq!(s.status(1).unwrap().0, JobState::Failed);
+    }
+
+    /// Jobs take turns: a worker asking again and again gets batches of every job with work in
+    /// turn, not the oldest job's until it is done.
+    #[test]
+    fn jobs_take_turns() {
+        let mut s = sched();
+        for id in [1, 2, 3] {
+            s.add_job(id, 100, 100, 0, &[], JobState::Queued);
+        }
+        let jobs: Vec<u64> = (0..7)
+            .map(|t| s.lease(&format!("w{t}"), t).unwrap().job_id)
+            .collect();
+        assert_eq!(jobs, [1, 2, 3, 1, 2, 3, 1]);
+        // A finished job drops out of the turns.
+        s.cancel(2);
+        assert_eq!(s.lease("w10", 10).unwrap().job_id, 3);
+        assert_eq!(s.lease("w11", 11).unwrap().job_id, 1);
+    }
+
     #[test]
     fn restart_reissues_what_was_not_done() {
         let mut s = sched();
@@ -816,7 +881,7 @@ mod tests {
         s.add_job(1, 1 << 40, 1 << 40, 0, &[], JobState::Queued);
         s.set_pixels(1, 2_000_000);
         // A relay's first batch has a pass per renderer.
-        let g = s.lease_for("relay", 8, 0).unwrap();
+        let g = s.lease_for("relay", Some(8), 0).unwrap();
         assert_eq!(g.end - g.start, 8);
         // One pass per second measured: 5 passes with 2 workers (2 × 2 Mpx / 1 Mpx/s = 4 s
         // is under the 5 s target)...
