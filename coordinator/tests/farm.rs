@@ -154,6 +154,27 @@ fn light_path_jobs_give_the_bytes_of_a_local_render() {
     }
 }
 
+/// A worker whose disk cannot keep its finished batches (full, say) sends them from memory:
+/// it used to give each batch up as failed, and so fail the job. Here every name the outbox
+/// writes through (`CACHE/results/LEASE.partial`) is taken by a folder.
+#[test]
+fn a_worker_whose_disk_cannot_keep_results_still_delivers_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "0.2"],
+    );
+    for lease in 1..=400 {
+        std::fs::create_dir_all(dir.path().join(format!("w/results/{lease}.partial"))).unwrap();
+    }
+    let _w = worker(&url, "w", dir.path());
+    let id = submit(&url, JOB);
+    let s = wait_done(&url, id);
+    assert_eq!(s["iterations_done"], 40, "{s}");
+    assert!(image(&url, id) == local_render(dir.path(), JOB), "bytes differ");
+}
+
 #[test]
 fn a_worker_killed_mid_batch_loses_nothing() {
     let dir = tempfile::tempdir().unwrap();

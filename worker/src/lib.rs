@@ -104,7 +104,8 @@ pub async fn run(
             lease = parcel.lease_id,
             "delivering a batch kept from an earlier run"
         );
-        deliver(&client, &outbox, &parcel, &mut trouble, &mut stop_rx).await?;
+        let bytes = outbox.bytes(&parcel)?;
+        deliver(&client, &outbox, &parcel, bytes, &mut trouble, &mut stop_rx).await?;
     }
     while !*stop_rx.borrow() {
         let lease = match request_lease(&client, &config).await {
@@ -135,8 +136,8 @@ pub async fn run(
             }
         };
         match work_on(&client, &config, &pool, &mut scenes, &outbox, lease.clone()).await {
-            Ok(Some(parcel)) => {
-                deliver(&client, &outbox, &parcel, &mut trouble, &mut stop_rx).await?;
+            Ok(Some((parcel, bytes))) => {
+                deliver(&client, &outbox, &parcel, bytes, &mut trouble, &mut stop_rx).await?;
             }
             Ok(None) => {}
             Err(e) => {
@@ -288,7 +289,7 @@ fn error_chain(e: &dyn std::error::Error) -> String {
 }
 
 /// Loads (or reuses) the lease's scene, renders the batch with heartbeats and keeps the result
-/// in the outbox; returns it (None if the lease was lost on the way).
+/// in the outbox; returns it and its bytes (None if the lease was lost on the way).
 async fn work_on(
     client: &Arc<Client>,
     config: &WorkerConfig,
@@ -296,7 +297,7 @@ async fn work_on(
     scenes: &mut SceneCache,
     outbox: &Outbox,
     lease: Lease,
-) -> anyhow::Result<Option<Parcel>> {
+) -> anyhow::Result<Option<(Parcel, Vec<u8>)>> {
     let scene = load_scene(client, config, scenes, &lease).await?;
     // Before any allocation for the batch: the film and the photon buffers.
     config
@@ -371,8 +372,15 @@ async fn work_on(
     } else {
         encoded
     };
-    outbox.put(&parcel, &bytes)?;
-    Ok(Some(parcel))
+    // A disk that cannot keep it (full, say) must not cost a finished batch, nor fail its job:
+    // it is sent from memory, and only a stop before delivery loses it.
+    if let Err(e) = outbox.put(&parcel, &bytes) {
+        tracing::warn!(
+            lease = lease.lease_id,
+            "cannot keep the result on disk ({e:#}); sending it from memory"
+        );
+    }
+    Ok(Some((parcel, bytes)))
 }
 
 /// Longest wait between two attempts to deliver a result.
@@ -388,10 +396,10 @@ async fn deliver(
     client: &Client,
     outbox: &Outbox,
     parcel: &Parcel,
+    bytes: Vec<u8>,
     trouble: &mut Trouble,
     stop: &mut watch::Receiver<bool>,
 ) -> anyhow::Result<bool> {
-    let bytes = outbox.bytes(parcel)?;
     let encoding = Encoding::sniff(&bytes);
     let mut backoff = Duration::from_millis(200);
     let mut stopped_at: Option<std::time::Instant> = None;
@@ -431,6 +439,13 @@ async fn deliver(
                 let s = resp.status();
                 let text = resp.text().await.unwrap_or_default();
                 tracing::warn!(lease = parcel.lease_id, "result refused: {s} {}", text.trim());
+                return Ok(false);
+            }
+            Err(e) if e.is_builder() => {
+                // The request cannot be made (a kept lease key that is not a header value):
+                // no attempt can ever send it.
+                outbox.remove(parcel);
+                tracing::warn!(lease = parcel.lease_id, "result dropped: {}", error_chain(&e));
                 return Ok(false);
             }
             Err(e) => RequestError::Unreachable(error_chain(&e)),

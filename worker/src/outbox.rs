@@ -66,7 +66,8 @@ impl Outbox {
         let _ = std::fs::remove_file(batch);
     }
 
-    /// Results left by an earlier run, oldest lease first. Unreadable entries are dropped.
+    /// Results left by an earlier run, oldest lease first. Unreadable entries, and entries
+    /// whose key is not a header value, are dropped.
     pub fn waiting(&self) -> Vec<Parcel> {
         let Ok(entries) = std::fs::read_dir(&self.dir) else {
             return Vec::new();
@@ -75,9 +76,12 @@ impl Outbox {
             .flatten()
             .filter(|e| e.path().extension().is_some_and(|x| x == "json"))
             .filter_map(|e| {
+                // A key that cannot be sent as a header (an edited entry) could never be
+                // delivered: dropped with the rest of the unreadable.
                 let parcel = std::fs::read(e.path())
                     .ok()
-                    .and_then(|b| serde_json::from_slice::<Parcel>(&b).ok());
+                    .and_then(|b| serde_json::from_slice::<Parcel>(&b).ok())
+                    .filter(|p| reqwest::header::HeaderValue::from_str(&p.key).is_ok());
                 if parcel.is_none() {
                     let _ = std::fs::remove_file(e.path());
                 }
@@ -129,6 +133,10 @@ mod tests {
         )
         .unwrap();
         std::fs::write(dir.path().join("results/6.json"), b"{").unwrap();
+        // An edited key that no request can carry used to wedge the worker, retried forever.
+        let mut bad = parcel(7);
+        bad.key = "k\n7".into();
+        outbox.put(&bad, b"seven").unwrap();
         let again = Outbox::open(dir.path()).unwrap();
         assert_eq!(again.waiting(), vec![parcel(4), parcel(9)]);
         assert_eq!(again.bytes(&parcel(9)).unwrap(), b"nine");
