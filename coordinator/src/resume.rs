@@ -8,6 +8,10 @@
 //! setting is refused instead of silently mixed in. What does not change the pixels (threads,
 //! pass count, time limit, checkpoints) may change between runs: `--spp 2048 --resume` after a
 //! finished 1024-pass render adds 1024 passes.
+//!
+//! The sums carry their SHA-256, so a file damaged or edited by hand is refused rather than
+//! mixed in (a deliberate forger can recompute it: the file is the user's own, and the
+//! checksum guards against accidents, not against its owner).
 
 use std::path::{Path, PathBuf};
 
@@ -20,8 +24,10 @@ use sha2::Digest;
 
 use crate::store::write_durably;
 
-/// First line of a resume file, before the fingerprint.
-const HEADER: &str = "photonfarm-resume 1 ";
+/// First line of a resume file, before the fingerprint and the sums' checksum.
+const HEADER: &str = "photonfarm-resume 2 ";
+/// The first line of files saved before the checksum: still read.
+const HEADER_V1: &str = "photonfarm-resume 1 ";
 
 /// The sums file of output `out`: `out.exr` → `out.exr.resume`.
 pub fn path_for(out: &Path) -> PathBuf {
@@ -59,8 +65,10 @@ pub fn fingerprint(
 
 /// Saves the sums atomically (a kill while saving leaves the previous file whole).
 pub fn save(path: &Path, fingerprint: &str, sum: &FilmSum) -> anyhow::Result<()> {
-    let mut bytes = format!("{HEADER}{fingerprint}\n").into_bytes();
-    bytes.extend(encode_batch(sum));
+    let sums = encode_batch(sum);
+    let checksum = hex::encode(sha2::Sha256::digest(&sums));
+    let mut bytes = format!("{HEADER}{fingerprint} {checksum}\n").into_bytes();
+    bytes.extend(sums);
     write_durably(path, &bytes).with_context(|| format!("cannot save {}", path.display()))
 }
 
@@ -77,8 +85,14 @@ pub fn load(path: &Path, fingerprint: &str, width: u32, height: u32) -> anyhow::
     };
     let newline = bytes.iter().position(|&b| b == b'\n').unwrap_or(bytes.len());
     let head = std::str::from_utf8(&bytes[..newline]).unwrap_or("");
-    let Some(saved) = head.strip_prefix(HEADER) else {
-        bail!("--resume: {} is not a photonfarm resume file", path.display());
+    let body = &bytes[(newline + 1).min(bytes.len())..];
+    let (saved, checksum) = match (head.strip_prefix(HEADER), head.strip_prefix(HEADER_V1)) {
+        (Some(rest), _) => match rest.split_once(' ') {
+            Some((f, c)) => (f, Some(c)),
+            None => (rest, Some("")),
+        },
+        (None, Some(f)) => (f, None),
+        (None, None) => bail!("--resume: {} is not a photonfarm resume file", path.display()),
     };
     if saved != fingerprint {
         bail!(
@@ -88,8 +102,15 @@ pub fn load(path: &Path, fingerprint: &str, width: u32, height: u32) -> anyhow::
             path.display()
         );
     }
+    if checksum.is_some_and(|c| c != hex::encode(sha2::Sha256::digest(body))) {
+        bail!(
+            "--resume: {} is damaged or was edited (its sums do not match their checksum); \
+             delete it or run without --resume",
+            path.display()
+        );
+    }
     // A file of another image size is refused as damaged, with both sizes named.
-    let sum = decode_batch(&bytes[(newline + 1).min(bytes.len())..], width, height)
+    let sum = decode_batch(body, width, height)
         .with_context(|| format!("--resume: {} is damaged", path.display()))?;
     Ok(sum)
 }
@@ -117,6 +138,13 @@ mod tests {
         let e = load(&path, "abd", 2, 1).unwrap_err().to_string();
         assert!(e.contains("different scene or settings"), "{e}");
         assert!(load(&path, "abc", 3, 1).is_err());
+        // Sums edited in place (one byte of the last pixel's sums) are refused.
+        let mut edited = std::fs::read(&path).unwrap();
+        let at = edited.len() - 9;
+        edited[at] ^= 1;
+        std::fs::write(&path, &edited).unwrap();
+        let e = load(&path, "abc", 2, 1).unwrap_err().to_string();
+        assert!(e.contains("edited"), "{e}");
         std::fs::write(&path, b"hello\n").unwrap();
         assert!(
             load(&path, "abc", 2, 1)
