@@ -83,3 +83,57 @@ async fn compressed_and_plain_results_are_accepted_and_bombs_refused() {
     let (_, status) = api.get(&format!("/api/jobs/{}", job["id"])).await;
     assert_eq!(status["iterations_done"], 2, "{status}");
 }
+
+/// Issue 31's finding 1, as the probe ran it: four 2048² results of a few kilobytes of zstd,
+/// each claiming 56 M pixels in 150 MB of zeros (3 bytes per zero pixel in bincode's varints,
+/// within what a 2048² result may expand to), sent at once to a coordinator whose address
+/// space is capped at 2 GiB. Decoded without a bound, each became about 1.3 GB of pixel sums
+/// and the coordinator aborted. Each is now refused at the vector's length, and the service
+/// goes on.
+#[tokio::test(flavor = "multi_thread")]
+async fn decode_bombs_leave_a_memory_capped_coordinator_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut serve, url) = support::serve_limited(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &[],
+        &[
+            ("PHOTONFARM_TOKEN", TOKEN),
+            ("PHOTONFARM_WORKER_TOKEN", WORKER_TOKEN),
+        ],
+        Some(2048),
+    );
+    let api = Api::new(&url);
+    let (s, job) = api
+        .submit(tar_of(&[("s.xml", &scene("", 2048, 2048))]), r#"{"passes": 100}"#)
+        .await;
+    assert_eq!(s, StatusCode::CREATED, "{job}");
+    // PFBATCH1, then bincode's varints: width and height 2048 (251 + u16), and a pixel vector
+    // of 56,000,000 (252 + u32), then zeros.
+    let mut plain = b"PFBATCH1".to_vec();
+    plain.extend([251, 0, 8, 251, 0, 8, 252]);
+    plain.extend(56_000_000u32.to_le_bytes());
+    plain.resize(plain.len() + 150_000_000, 0);
+    let bomb = zstd::bulk::compress(&plain, 3).unwrap();
+    drop(plain);
+    eprintln!("each bomb is {} bytes", bomb.len());
+    assert!(bomb.len() < 64 << 10);
+    let mut uploads = Vec::new();
+    for i in 0..4 {
+        let lease = api.lease(&format!("bomber-{i}")).await.unwrap();
+        let (id, key) = (
+            lease["lease_id"].as_u64().unwrap(),
+            lease["key"].as_str().unwrap().to_string(),
+        );
+        let (api, bomb) = (Api::new(&url), bomb.clone());
+        uploads.push(tokio::spawn(async move {
+            put(&api, id, &key, Some("zstd"), bomb).await
+        }));
+    }
+    for u in uploads {
+        assert_eq!(u.await.unwrap(), StatusCode::BAD_REQUEST);
+    }
+    assert!(serve.0.try_wait().unwrap().is_none(), "the coordinator died");
+    let (s, status) = api.get(&format!("/api/jobs/{}", job["id"])).await;
+    assert_eq!(s, StatusCode::OK, "{status}");
+}
