@@ -264,7 +264,7 @@ impl Scheduler {
         }
     }
 
-    /// Grants the next batch to `worker`, from the oldest job with work it may take.
+    /// Grants the next batch to `worker`, from the next job in turn with work it may take.
     pub fn lease(&mut self, worker: &str, now: Millis) -> Option<Grant> {
         self.lease_for(worker, None, now)
     }

@@ -68,11 +68,27 @@ async fn the_api_answers_within_50_ms_while_a_huge_job_is_submitted_and_results_
     }
     let encoded = photonfarm::protocol::encode_batch(&sum);
     let mut results = 0;
+    let mut leases = 0;
     while results < 3 {
         let lease = api.lease("w").await.unwrap();
+        leases += 1;
+        assert!(leases <= 12, "the big job's leases do not come");
         let key = lease["key"].as_str().unwrap();
         let path = format!("/api/leases/{}/", lease["lease_id"]);
-        assert_eq!(lease["job_id"].as_u64(), Some(big_id), "the oldest job first");
+        if lease["job_id"].as_u64() != Some(big_id) {
+            // Jobs take turns: the SPPM job's batch is handed back cleanly.
+            let (s, v) = api
+                .call(
+                    reqwest::Method::POST,
+                    &(path + "release"),
+                    WORKER_TOKEN,
+                    key,
+                    br#"{"error": null}"#.to_vec(),
+                )
+                .await;
+            assert_eq!(s, StatusCode::OK, "{v}");
+            continue;
+        }
         let (s, v) = api
             .call(
                 reqwest::Method::PUT,
