@@ -249,6 +249,10 @@ async fn bundle_to_disk(field: &mut axum::extract::multipart::Field<'_>, path: &
         hash.update(&chunk);
         file.write_all(&chunk).await.map_err(storage_error)?;
     }
+    // Flushed first: tokio's File reports a failed background write (ENOSPC on a full disk)
+    // only to the next write or flush, and sync_all alone drops it, which stored a truncated
+    // archive (then refused as a bad bundle).
+    file.flush().await.map_err(storage_error)?;
     file.sync_all().await.map_err(storage_error)?;
     Ok(hex::encode(hash.finalize()))
 }

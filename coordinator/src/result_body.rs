@@ -133,6 +133,9 @@ pub async fn receive_result_to(
         }
         file.write_all(&chunk).await.map_err(BodyError::Io)?;
     }
+    // Flushed first, or a failed last write (a full disk) would go unreported (see the
+    // coordinator's bundle_to_disk).
+    file.flush().await.map_err(BodyError::Io)?;
     file.sync_all().await.map_err(BodyError::Io)?;
     Ok(len)
 }

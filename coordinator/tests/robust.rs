@@ -609,6 +609,26 @@ async fn a_scene_that_loads_too_long_is_refused() {
     assert_eq!(s, StatusCode::CREATED, "{v}");
 }
 
+/// A full data disk is the operator's to fix and the client's to retry: a 507 that says so (it
+/// was a 500, or a 422 when the unpacked bundle came out truncated). The disk is played by
+/// /dev/full (every write fails with ENOSPC), linked where the first submission's archive goes.
+#[cfg(target_os = "linux")]
+#[tokio::test(flavor = "multi_thread")]
+async fn a_full_data_disk_is_a_507_and_the_next_submission_goes_through() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let (coordinator, url) = serve(&data, "127.0.0.1:0", &[]);
+    let scratch = data.join(format!("bundles/incoming-{}-0", coordinator.0.id()));
+    std::fs::create_dir_all(&scratch).unwrap();
+    std::os::unix::fs::symlink("/dev/full", scratch.join("bundle.tar")).unwrap();
+    let api = Api::new(&url);
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    assert_eq!(s, StatusCode::INSUFFICIENT_STORAGE, "{v}");
+    assert!(error_of(&v).contains("disk is full"), "{v}");
+    let (s, v) = api.submit(tar_of(&[("s.xml", &scene("", 8, 8))]), "{}").await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+}
+
 /// A storage failure is the coordinator's fault: a 500 without details (it used to be a 400,
 /// with the server's paths in the message), and the service goes on.
 #[tokio::test(flavor = "multi_thread")]
