@@ -93,7 +93,7 @@ pub fn render_path(scene: &Scene, spp: u64, seed: u64) -> FilmSum {
 
 /// SPPM settings from the scene, with the given photon count.
 pub fn sppm_settings(scene: &Scene, photons: u64) -> SppmSettings {
-    let (mut s, _) = SppmSettings::from_scene(scene);
+    let mut s = SppmSettings::from_scene(scene);
     s.photons = photons;
     s
 }

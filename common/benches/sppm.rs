@@ -27,7 +27,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn main() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml");
     let scene = Scene::load(&path, &[("res".into(), "256".into())]).unwrap();
-    let (mut settings, _) = SppmSettings::from_scene(&scene);
+    let mut settings = SppmSettings::from_scene(&scene);
     settings.photons = PHOTONS;
     let radius = settings.initial_radius;
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
@@ -174,7 +174,7 @@ fn main() {
     let res = [("res".to_string(), "128".to_string())];
     for (name, text) in [("with fog", &fog_text), ("without fog", &clear_text)] {
         let scene = Scene::from_str(text, &fog_path, &res).unwrap();
-        let (mut s, _) = SppmSettings::from_scene(&scene);
+        let mut s = SppmSettings::from_scene(&scene);
         s.photons = PHOTONS;
         let render = RenderSettings {
             seed: 0,

@@ -10,7 +10,7 @@ use crate::integrator::direct_illumination::DirectSettings;
 use crate::integrator::path::PathSettings;
 use crate::integrator::sppm::{SppmError, SppmSettings, VolumeEstimate};
 use crate::render::{Method, RenderSettings};
-use crate::scene::Scene;
+use crate::scene::{MethodParams, Scene};
 
 /// The rendering method. Its names (the job API's JSON, `--integrator`, the logs) are the
 /// variants' own, lowercased, by serde and clap alike; [`Integrator::name`] spells them for the
@@ -184,7 +184,7 @@ impl JobSettings {
             return Err(JobError::Zero("the checkpoint interval"));
         }
         self.check_defines()?;
-        let mut warnings = Vec::new();
+        let warnings = Vec::new();
         let integrator = self.integrator.unwrap_or(scene.integrator.kind);
         let (method, declared) = match integrator {
             Integrator::Path | Integrator::Direct | Integrator::Ptracer | Integrator::Hybrid => {
@@ -209,19 +209,14 @@ impl JobSettings {
                 (method, None)
             }
             Integrator::Sppm => {
-                let (mut s, w) = SppmSettings::from_scene(scene);
-                warnings.extend(w);
+                let mut s = SppmSettings::from_scene(scene);
                 s.photons = self.photons.unwrap_or(s.photons);
                 s.initial_radius = self.radius.unwrap_or(s.initial_radius);
                 s.alpha = self.alpha.unwrap_or(s.alpha);
                 s.k = self.k.unwrap_or(s.k);
                 if let Some(e) = self.volume_estimate {
-                    let declared = scene.integrator.kind == Integrator::Sppm
-                        && scene
-                            .integrator
-                            .params
-                            .iter()
-                            .any(|(n, _)| n == "volume_radius_ratio");
+                    let declared = matches!(&scene.integrator.params,
+                        MethodParams::Sppm(p) if p.volume_radius_ratio.is_some());
                     if !declared {
                         s = s.with_volume_estimate(e);
                     }
@@ -229,13 +224,10 @@ impl JobSettings {
                 }
                 s.volume_radius_ratio = self.volume_radius_ratio.unwrap_or(s.volume_radius_ratio);
                 s.validate()?;
-                let declared = scene
-                    .integrator
-                    .params
-                    .iter()
-                    .find(|(n, _)| n == "iterations")
-                    .map(|(_, v)| declared_iterations(*v))
-                    .transpose()?;
+                let declared = match &scene.integrator.params {
+                    MethodParams::Sppm(p) => p.iterations.map(declared_iterations).transpose()?,
+                    _ => None,
+                };
                 (Method::Sppm(s), declared)
             }
         };

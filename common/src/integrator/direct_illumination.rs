@@ -26,17 +26,18 @@ impl DirectSettings {
     /// The scene's `<integrator type="direct">` settings (Mitsuba's defaults otherwise: one of
     /// each).
     pub fn from_scene(scene: &Scene) -> DirectSettings {
-        let get = |name: &str| {
-            scene
-                .integrator
-                .params
-                .iter()
-                .find(|(n, _)| n == name)
-                .map_or(1, |(_, v)| *v as u32)
-        };
-        DirectSettings {
-            emitter_samples: get("emitter_samples"),
-            bsdf_samples: get("bsdf_samples"),
+        match scene.integrator.params {
+            crate::scene::MethodParams::Direct {
+                emitter_samples,
+                bsdf_samples,
+            } => DirectSettings {
+                emitter_samples,
+                bsdf_samples,
+            },
+            _ => DirectSettings {
+                emitter_samples: 1,
+                bsdf_samples: 1,
+            },
         }
     }
 }

@@ -147,8 +147,7 @@ impl SppmSettings {
 
     /// Settings from the scene's `<integrator>`: Mitsuba's `photon_count`, `initial_radius` (0 or
     /// absent: [`default_radius`]) and `alpha`, our `k`, and `max_depth` and `rr_depth`.
-    /// Unknown parameters of an `sppm` integrator are reported as warnings.
-    pub fn from_scene(scene: &Scene) -> (SppmSettings, Vec<String>) {
+    pub fn from_scene(scene: &Scene) -> SppmSettings {
         let decl = &scene.integrator;
         let mut s = SppmSettings {
             photons: default_photons(scene),
@@ -160,26 +159,17 @@ impl SppmSettings {
             max_depth: u32::try_from(decl.max_depth).ok(),
             rr_depth: decl.rr_depth,
         };
-        let mut warnings = Vec::new();
-        if decl.kind == crate::job::Integrator::Sppm {
-            for (name, v) in &decl.params {
-                match name.as_str() {
-                    "photon_count" => s.photons = *v as u64,
-                    "initial_radius" => s.initial_radius = *v as f32,
-                    "alpha" => s.alpha = *v,
-                    "k" => s.k = *v as f32,
-                    "volume_radius_ratio" => s.volume_radius_ratio = *v as f32,
-                    "samples_per_pass" | "iterations" => {}
-                    other => warnings.push(format!(
-                        "<integrator type=\"sppm\">: parameter '{other}' is not used"
-                    )),
-                }
-            }
+        if let crate::scene::MethodParams::Sppm(p) = &decl.params {
+            s.photons = p.photon_count.unwrap_or(s.photons);
+            s.initial_radius = p.initial_radius.unwrap_or(s.initial_radius);
+            s.alpha = p.alpha.unwrap_or(s.alpha);
+            s.k = p.k.unwrap_or(s.k);
+            s.volume_radius_ratio = p.volume_radius_ratio.unwrap_or(s.volume_radius_ratio);
         }
         if s.initial_radius <= 0.0 {
             s.initial_radius = default_radius(scene);
         }
-        (s, warnings)
+        s
     }
 
     /// These settings with volume estimate `estimate`, and its default volume radius ratio

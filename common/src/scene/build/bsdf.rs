@@ -1,0 +1,332 @@
+//! `<bsdf>`: every material plugin, its roughness and index of refraction.
+
+use crate::bsdf::{
+    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, Principled, RoughDielectric,
+    Roughness, ThinDielectric, eta_from_specular,
+};
+use crate::color::Rgb;
+use crate::scene::named;
+use crate::scene::props::{Props, Res};
+use crate::scene::xml::Element;
+use crate::texture::Param;
+
+use super::Builder;
+
+impl Builder<'_> {
+    /// A `<bsdf>` or `<ref>` to one.
+    pub(super) fn bsdf_or_ref(&mut self, el: &Element) -> Res<Bsdf> {
+        if el.tag == "ref" {
+            let id = el
+                .attr("id")
+                .ok_or_else(|| self.ctx.err(el, "a <ref> needs an id"))?;
+            let i = *self
+                .bsdf_ids
+                .get(id)
+                .ok_or_else(|| self.ctx.err(el, format!("no <bsdf> with id \"{id}\"")))?;
+            return Ok(self.bsdfs[i as usize].clone());
+        }
+        self.bsdf(el)
+    }
+
+    pub(super) fn nested_bsdfs(&mut self, p: &Props) -> Res<Vec<Bsdf>> {
+        let mut out = Vec::new();
+        let refs: Vec<&Element> = p
+            .objects("ref")
+            .into_iter()
+            .filter(|c| {
+                !c.attr("id").is_some_and(|id| {
+                    self.medium_ids.contains_key(id)
+                        || self.area_ids.contains(id)
+                        || self.texture_ids.contains_key(id)
+                })
+            })
+            .collect();
+        for c in p.objects("bsdf").into_iter().chain(refs) {
+            out.push(self.bsdf_or_ref(c)?);
+        }
+        Ok(out)
+    }
+
+    pub(super) fn bsdf(&mut self, el: &Element) -> Res<Bsdf> {
+        let p = Props::new(self.ctx, el)?;
+        let bsdf = match p.kind()? {
+            "diffuse" => Bsdf::Diffuse(Diffuse {
+                reflectance: self.color_param(&p, "reflectance", Rgb::splat(0.5))?,
+            }),
+            kind @ ("conductor" | "roughconductor") => {
+                let (eta, k) = match (p.rgb("eta")?, p.rgb("k")?, p.string("material")?) {
+                    (Some(eta), Some(k), None) => (eta, k),
+                    (None, None, material) => {
+                        named::conductor(material.unwrap_or("none")).map_err(|m| p.err_at("material", m))?
+                    }
+                    _ => return Err(self.ctx.err(el, "give both eta and k, or a material, not a mix")),
+                };
+                if eta.min_element() < 0.0 || k.min_element() < 0.0 {
+                    return Err(self.ctx.err(el, "eta and k cannot be negative"));
+                }
+                Bsdf::Conductor(Conductor {
+                    eta,
+                    k,
+                    specular: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                    roughness: if kind == "roughconductor" {
+                        Some(self.roughness(&p)?)
+                    } else {
+                        None
+                    },
+                })
+            }
+            "dielectric" => Bsdf::Dielectric(Dielectric {
+                eta: self.relative_ior(&p, "bk7")?,
+                specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
+            }),
+            "roughdielectric" => Bsdf::RoughDielectric(Box::new(RoughDielectric {
+                eta: self.relative_ior(&p, "bk7")?,
+                roughness: self.roughness(&p)?,
+                specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
+            })),
+            "thindielectric" => Bsdf::ThinDielectric(ThinDielectric {
+                eta: self.relative_ior(&p, "bk7")?,
+                specular_reflectance: self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                specular_transmittance: self.color_param(&p, "specular_transmittance", Rgb::ONE)?,
+            }),
+            "mask" => {
+                let opacity = self.float_param(&p, "opacity", 0.5)?;
+                let mut nested = self.nested_bsdfs(&p)?;
+                if nested.len() != 1 {
+                    return Err(self
+                        .ctx
+                        .err(el, format!("mask needs one nested bsdf, not {}", nested.len())));
+                }
+                Bsdf::Mask(Box::new((nested.remove(0), opacity)))
+            }
+            kind @ ("plastic" | "roughplastic") => {
+                let roughness = if kind == "roughplastic" {
+                    Some(self.microfacet(&p)?)
+                } else {
+                    None
+                };
+                Bsdf::Plastic(Box::new(Plastic::new(
+                    self.color_param(&p, "diffuse_reflectance", Rgb::splat(0.5))?,
+                    self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                    self.relative_ior(&p, "polypropylene")?,
+                    p.boolean("nonlinear")?.unwrap_or(false),
+                    roughness,
+                )))
+            }
+            "principled" => Bsdf::Principled(Box::new(self.principled(&p)?)),
+            "twosided" => {
+                let mut nested = self.nested_bsdfs(&p)?;
+                match nested.len() {
+                    1 => {
+                        let b = nested.remove(0);
+                        Bsdf::TwoSided(Box::new((b.clone(), b)))
+                    }
+                    2 => {
+                        let back = nested.remove(1);
+                        Bsdf::TwoSided(Box::new((nested.remove(0), back)))
+                    }
+                    n => {
+                        return Err(self
+                            .ctx
+                            .err(el, format!("twosided needs one or two nested bsdfs, not {n}")));
+                    }
+                }
+            }
+            "null" => Bsdf::Null,
+            "blendbsdf" => {
+                let w = self.float_param(&p, "weight", 0.5)?;
+                if let Param::Fixed(w) = w
+                    && !(0.0..=1.0).contains(&w)
+                {
+                    return Err(p.err_at("weight", format!("weight must lie in [0, 1], not {w}")));
+                }
+                let mut nested = self.nested_bsdfs(&p)?;
+                if nested.len() != 2 {
+                    return Err(self.ctx.err(
+                        el,
+                        format!("blendbsdf needs two nested bsdfs, not {}", nested.len()),
+                    ));
+                }
+                let second = nested.remove(1);
+                Bsdf::Blend(Box::new((nested.remove(0), second)), w)
+            }
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!(
+                        "bsdf type \"{other}\" is not supported (diffuse, conductor, roughconductor, \
+                         dielectric, roughdielectric, thindielectric, plastic, roughplastic, principled, \
+                         twosided, blendbsdf, mask, null)"
+                    ),
+                ));
+            }
+        };
+        p.finish()?;
+        Ok(bsdf)
+    }
+
+    /// Mitsuba's `principled`: every parameter it reads, with its defaults. Its weights are
+    /// numbers in [0, 1] or textures; `eta` and `specular` (one or the other) are numbers.
+    pub(super) fn principled(&mut self, p: &Props) -> Res<Principled> {
+        let mut weight = |name: &str, default: f32| -> Res<Param<f32>> {
+            let v = self.float_param(p, name, default)?;
+            if let Param::Fixed(x) = v
+                && !(0.0..=1.0).contains(&x)
+            {
+                return Err(p.err_at(name, format!("'{name}' must lie in [0, 1], not {x}")));
+            }
+            Ok(v)
+        };
+        let roughness = weight("roughness", 0.5)?;
+        let anisotropic = weight("anisotropic", 0.0)?;
+        let metallic = weight("metallic", 0.0)?;
+        let spec_trans = weight("spec_trans", 0.0)?;
+        let spec_tint = weight("spec_tint", 0.0)?;
+        let sheen = weight("sheen", 0.0)?;
+        let sheen_tint = weight("sheen_tint", 0.0)?;
+        let flatness = weight("flatness", 0.0)?;
+        let clearcoat = weight("clearcoat", 0.0)?;
+        let clearcoat_gloss = weight("clearcoat_gloss", 0.0)?;
+        // Mitsuba's get_flag: a transmission lobe exists when spec_trans is given and is not
+        // the number 0; then eta = 1 (or specular = 0) is nudged off the index-matched case.
+        let transmits = !matches!(spec_trans, Param::Fixed(t) if t == 0.0);
+        let eta = match (p.float("eta")?, p.float("specular")?) {
+            (Some(_), Some(_)) => {
+                return Err(self
+                    .ctx
+                    .err(p.el, "give either eta or specular (which sets eta), not both"));
+            }
+            (Some(eta), None) => {
+                if eta <= 0.0 {
+                    return Err(p.err_at("eta", format!("eta must be positive, not {eta}")));
+                }
+                if transmits && eta == 1.0 { 1.001 } else { eta }
+            }
+            (None, specular) => {
+                let specular = specular.unwrap_or(0.5);
+                if !(0.0..12.5).contains(&specular) {
+                    return Err(p.err_at(
+                        "specular",
+                        format!("specular must lie in [0, 12.5), not {specular}"),
+                    ));
+                }
+                eta_from_specular(if transmits && specular == 0.0 {
+                    1e-3
+                } else {
+                    specular
+                })
+            }
+        };
+        let rate = |name: &str| -> Res<f32> {
+            let v = p.float_or(name, 1.0)?;
+            if v < 0.0 {
+                return Err(p.err_at(name, format!("'{name}' cannot be negative, not {v}")));
+            }
+            Ok(v)
+        };
+        Ok(Principled {
+            base_color: self.color_param(p, "base_color", Rgb::splat(0.5))?,
+            roughness,
+            anisotropic,
+            metallic,
+            spec_trans,
+            spec_tint,
+            sheen,
+            sheen_tint,
+            flatness,
+            clearcoat,
+            clearcoat_gloss,
+            eta,
+            diffuse_sampling_rate: rate("diffuse_reflectance_sampling_rate")?,
+            specular_sampling_rate: rate("main_specular_sampling_rate")?,
+            clearcoat_sampling_rate: rate("clearcoat_sampling_rate")?,
+        })
+    }
+
+    /// A rough conductor's microfacets, whose `alpha` may be a texture.
+    pub(super) fn roughness(&mut self, p: &Props) -> Res<Roughness> {
+        let textured = ["alpha", "alpha_u", "alpha_v"]
+            .into_iter()
+            .find_map(|name| self.texture_param(p, name).transpose().map(|t| (name, t)));
+        match textured {
+            Some((name, texture)) => {
+                if name != "alpha" {
+                    return Err(p.err_at(
+                        name,
+                        "a texture for alpha_u or alpha_v (anisotropic roughness) is not supported".into(),
+                    ));
+                }
+                let mf = self.microfacet(p)?;
+                Ok(Roughness {
+                    distribution: mf.distribution,
+                    alpha: Param::Textured(texture?),
+                })
+            }
+            None => {
+                let mf = self.microfacet(p)?;
+                Ok(Roughness {
+                    distribution: mf.distribution,
+                    alpha: Param::Fixed(mf.alpha),
+                })
+            }
+        }
+    }
+
+    /// A rough material's microfacets: Mitsuba's `distribution` (default Beckmann) and `alpha`
+    /// (default 0.1, at least 1e-4 as Mitsuba clamps it).
+    pub(super) fn microfacet(&self, p: &Props) -> Res<Microfacet> {
+        let distribution = match p.string("distribution")?.map(str::to_ascii_lowercase).as_deref() {
+            None | Some("beckmann") => Distribution::Beckmann,
+            Some("ggx") => Distribution::Ggx,
+            Some(d) => {
+                return Err(p.err_at(
+                    "distribution",
+                    format!("distribution \"{d}\" is not supported (beckmann, ggx)"),
+                ));
+            }
+        };
+        let alpha = match (p.float("alpha")?, p.float("alpha_u")?, p.float("alpha_v")?) {
+            (Some(a), None, None) => a,
+            (None, None, None) => 0.1,
+            (None, Some(u), Some(v)) if u == v => u,
+            (None, Some(_), Some(_)) => {
+                return Err(self.ctx.err(
+                    p.el,
+                    "anisotropic roughness (alpha_u different from alpha_v) is not supported",
+                ));
+            }
+            _ => return Err(self.ctx.err(p.el, "give alpha, or both alpha_u and alpha_v")),
+        };
+        if alpha.is_nan() || alpha < 0.0 {
+            return Err(p.err_at("alpha", format!("alpha cannot be negative, not {alpha}")));
+        }
+        if p.boolean("sample_visible")? == Some(false) {
+            return Err(p.err_at("sample_visible", "sample_visible=false is not supported".into()));
+        }
+        Ok(Microfacet {
+            distribution,
+            alpha: alpha.max(1e-4),
+        })
+    }
+
+    /// int_ior / ext_ior, each a number or one of Mitsuba's names.
+    pub(super) fn relative_ior(&self, p: &Props, default_int: &str) -> Res<f32> {
+        let read = |name: &str, default: &str| -> Res<f32> {
+            let v = match p.tag_of(name) {
+                Some("string") => {
+                    let s = p.string(name)?.unwrap_or(default);
+                    named::ior(s).map_err(|m| p.err_at(name, m))?
+                }
+                Some(_) => p.float(name)?.unwrap_or(1.0),
+                None => named::ior(default).expect("default names are in the table"),
+            };
+            if v < 1.0 {
+                return Err(p.err_at(name, format!("{name} must be at least 1, not {v}")));
+            }
+            Ok(v)
+        };
+        Ok(read("int_ior", default_int)? / read("ext_ior", "air")?)
+    }
+}

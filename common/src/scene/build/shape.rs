@@ -1,0 +1,179 @@
+//! `<shape>`: spheres, rectangles, disks, cubes and meshes, with their area emitters.
+
+use std::collections::HashMap;
+
+use glam::{Mat4, Vec3A};
+
+use crate::bsdf::{Bsdf, Diffuse};
+use crate::color::Rgb;
+use crate::geometry::{Primitive, Sphere, Triangle};
+use crate::scene::ShapeInfo;
+use crate::scene::mesh::{self, Mesh};
+use crate::scene::props::{Props, Res};
+use crate::scene::xml::Element;
+use crate::texture::Param;
+
+use super::Builder;
+
+impl Builder<'_> {
+    pub(super) fn shape(&mut self, el: &Element, area_ids: &HashMap<String, &Element>) -> Res<()> {
+        let p = Props::new(self.ctx, el)?;
+        let index = self.shapes.len() as u32;
+        let kind = p.kind()?;
+        let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        let flip = p.boolean("flip_normals")?.unwrap_or(false);
+        let is_file = matches!(kind, "obj" | "ply" | "serialized");
+        let mut face_normals = false;
+        let mesh = match kind {
+            "sphere" => {
+                let center = p.point("center")?.unwrap_or(Vec3A::ZERO);
+                let radius = p.positive("radius", 1.0)?;
+                let m = to_world
+                    * Mat4::from_translation(center.into())
+                    * Mat4::from_scale(glam::Vec3::splat(radius));
+                let (scale, rotation, translation) = m.to_scale_rotation_translation();
+                if (scale.x - scale.y).abs() > 1e-4 * scale.x || (scale.x - scale.z).abs() > 1e-4 * scale.x {
+                    return Err(self.ctx.err(el, "a sphere's to_world must scale uniformly"));
+                }
+                self.prims.push(Primitive::Sphere(Sphere {
+                    center: translation.into(),
+                    radius: scale.x.abs(),
+                    shape: index,
+                    flip,
+                    rotation,
+                }));
+                None
+            }
+            "rectangle" => Some(mesh::rectangle()),
+            "cube" => Some(mesh::cube()),
+            "disk" => Some(mesh::disk()),
+            "obj" | "ply" | "serialized" => {
+                let name = p
+                    .string("filename")?
+                    .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
+                let path = p.resolve_file("filename", name)?;
+                let mut m = match kind {
+                    "obj" => mesh::load_obj(&path),
+                    "ply" => mesh::load_ply(&path),
+                    _ => {
+                        let index = p.int("shape_index")?.unwrap_or(0);
+                        if !(0..=u32::MAX as i64).contains(&index) {
+                            return Err(p.err_at("shape_index", format!("shape_index cannot be {index}")));
+                        }
+                        mesh::load_serialized(&path, index as u32)
+                    }
+                }
+                .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
+                // Mitsuba mirrors v on OBJ files unless told not to, and on PLY files if told.
+                if kind != "serialized" && p.boolean("flip_tex_coords")?.unwrap_or(kind == "obj") {
+                    m.flip_tex_coords();
+                }
+                face_normals = p.boolean("face_normals")?.unwrap_or(false);
+                if face_normals {
+                    m.normals = None;
+                }
+                m.validate()
+                    .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
+                if m.triangles.is_empty() {
+                    return Err(p.err_at("filename", format!("{} has no faces", path.display())));
+                }
+                Some(m)
+            }
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!(
+                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply, serialized)"
+                    ),
+                ));
+            }
+        };
+        if let Some(mesh) = mesh {
+            let mut mesh = mesh.transformed(&to_world);
+            // Mitsuba smooths a mesh file that has no normals, unless told to use face normals.
+            if is_file && mesh.normals.is_none() && !face_normals {
+                mesh.recompute_vertex_normals();
+            }
+            self.push_mesh(mesh, index, flip);
+        }
+
+        let (interior, exterior, _) = self.media_of(&p, true)?;
+        let nested = self.nested_bsdfs(&p)?;
+        let referred: Vec<&Element> = p
+            .objects("ref")
+            .into_iter()
+            .filter_map(|r| r.attr("id").and_then(|id| area_ids.get(id)).copied())
+            .collect();
+        let emitter = match (p.object("emitter")?, referred.as_slice()) {
+            (None, []) => None,
+            (Some(e), []) => Some(e),
+            (None, [e]) => {
+                let id = e.attr("id").expect("referred to by id");
+                if !self.area_taken.insert(id.to_string()) {
+                    return Err(self.ctx.err(
+                        el,
+                        format!("area emitter \"{id}\" already belongs to another shape"),
+                    ));
+                }
+                Some(*e)
+            }
+            _ => return Err(self.ctx.err(el, "a shape takes one emitter")),
+        };
+        let bsdf = match nested.len() {
+            // Mitsuba's defaults: an emitter absorbs what reaches it; anything else, a medium's
+            // boundary included, is grey (a boundary must say <bsdf type="null"/>).
+            0 if emitter.is_some() => Bsdf::Diffuse(Diffuse {
+                reflectance: Param::Fixed(Rgb::ZERO),
+            }),
+            0 => Bsdf::Diffuse(Diffuse {
+                reflectance: Param::Fixed(Rgb::splat(0.5)),
+            }),
+            1 => nested.into_iter().next().expect("one element"),
+            _ => return Err(self.ctx.err(el, "a shape takes one bsdf")),
+        };
+        if let Some(em) = emitter {
+            let ep = Props::new(self.ctx, em)?;
+            if ep.kind()? != "area" {
+                return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
+            }
+            let radiance = ep.emission("radiance", Rgb::ONE)?;
+            ep.finish()?;
+            self.area_emitters.push((index, radiance));
+        }
+        p.finish()?;
+        self.bsdfs.push(bsdf);
+        self.shapes.push(ShapeInfo {
+            name: el
+                .attr("id")
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("{kind} at line {}", el.line)),
+            bsdf: self.bsdfs.len() as u32 - 1,
+            light: None,
+            interior,
+            exterior,
+        });
+        Ok(())
+    }
+
+    pub(super) fn push_mesh(&mut self, mesh: Mesh, shape: u32, flip: bool) {
+        for t in &mesh.triangles {
+            let p = t.map(|i| mesh.positions[i as usize]);
+            // Degenerate triangles can never be hit and would only divide by zero elsewhere.
+            if (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0 {
+                continue;
+            }
+            let n = mesh
+                .normals
+                .as_ref()
+                .map(|ns| Box::new(t.map(|i| ns[i as usize])));
+            let uv = mesh.uvs.as_ref().map(|uvs| Box::new(t.map(|i| uvs[i as usize])));
+            self.prims.push(Primitive::Triangle(Triangle {
+                p,
+                n,
+                uv,
+                shape,
+                flip,
+            }));
+        }
+    }
+}
