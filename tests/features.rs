@@ -5,7 +5,8 @@
 //! - `materials.xml`: rough conductor (named and eta/k), plastic, rough plastic (nonlinear),
 //!   blendbsdf, twosided with distinct sides;
 //! - `lights.xml`: spot, point and disk area lights, a thin-lens camera, a named glass IOR;
-//! - `meshes.xml`: PLY with vertex normals (and with `face_normals`), OBJ quads, `matrix`.
+//! - `meshes.xml`: PLY with vertex normals (and with `face_normals`), OBJ quads, `matrix`;
+//! - `mirrored.xml`: rectangles and a disk under mirroring transforms.
 //!
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
@@ -31,6 +32,15 @@ fn materials_match_mitsuba() {
 #[test]
 fn lights_and_thin_lens_match_mitsuba() {
     check("lights");
+}
+
+/// `mirrored.xml`: a rectangle light, a disk light and a one-sided wall placed by mirroring
+/// `to_world` matrices. Mitsuba orients its rectangle and disk by the inverse transpose of
+/// to_world; by the transformed edges' cross product, both lights faced away from the room
+/// and the wall from the camera.
+#[test]
+fn mirrored_rectangles_and_disks_face_as_in_mitsuba() {
+    check("mirrored");
 }
 
 #[test]

@@ -32,6 +32,13 @@ impl Mesh {
         self
     }
 
+    /// Turns every triangle over: its geometric normal (the cross product of its edges) flips.
+    pub fn reverse_winding(&mut self) {
+        for t in &mut self.triangles {
+            t.swap(1, 2);
+        }
+    }
+
     /// Smooth vertex normals for a mesh file that has none, as Mitsuba computes them (in world
     /// space): each face's normal weighted by its angle at the vertex (Thürmer and Wüthrich).
     /// Without them a curved mesh would look faceted in ours and smooth in Mitsuba.

@@ -90,6 +90,13 @@ impl Builder<'_> {
         };
         if let Some(mesh) = mesh {
             let mut mesh = mesh.transformed(&to_world);
+            // Mitsuba's rectangle and disk are analytic: their front is the transformed normal
+            // (the inverse transpose of to_world applied to +z), not the transformed edges'
+            // cross product, and the two disagree under a mirroring to_world (negative
+            // determinant). Such lights used to face away, leaving an interior 30% too dark.
+            if matches!(kind, "rectangle" | "disk") && glam::Mat3::from_mat4(to_world).determinant() < 0.0 {
+                mesh.reverse_winding();
+            }
             // Mitsuba smooths a mesh file that has no normals, unless told to use face normals.
             if is_file && mesh.normals.is_none() && !face_normals {
                 mesh.recompute_vertex_normals();
