@@ -94,7 +94,10 @@ impl Builder<'_> {
             // (the inverse transpose of to_world applied to +z), not the transformed edges'
             // cross product, and the two disagree under a mirroring to_world (negative
             // determinant). Such lights used to face away, leaving an interior 30% too dark.
-            if matches!(kind, "rectangle" | "disk") && glam::Mat3::from_mat4(to_world).determinant() < 0.0 {
+            // Mitsuba's cube is a mesh whose vertex normals (transformed the same way) decide
+            // its front, so it too faces out.
+            let mirrored = glam::Mat3::from_mat4(to_world).determinant() < 0.0;
+            if matches!(kind, "rectangle" | "disk" | "cube") && mirrored {
                 mesh.reverse_winding();
             }
             // Mitsuba smooths a mesh file that has no normals, unless told to use face normals.
