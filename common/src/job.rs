@@ -137,8 +137,6 @@ pub struct Resolved {
     pub render: RenderSettings,
     /// Passes to render; None when only a time limit ends the render.
     pub passes: Option<u64>,
-    /// Warnings about unused scene parameters.
-    pub warnings: Vec<String>,
 }
 
 /// A scene's `iterations`: a float in the XML, so a negative, fractional or huge value must
@@ -184,7 +182,6 @@ impl JobSettings {
             return Err(JobError::Zero("the checkpoint interval"));
         }
         self.check_defines()?;
-        let warnings = Vec::new();
         let integrator = self.integrator.unwrap_or(scene.integrator.kind);
         let (method, declared) = match integrator {
             Integrator::Path | Integrator::Direct | Integrator::Ptracer | Integrator::Hybrid => {
@@ -242,7 +239,6 @@ impl JobSettings {
                 method,
             },
             passes,
-            warnings,
         })
     }
 }

@@ -44,9 +44,6 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     args.limits
         .limits()
         .check_job(scene.width(), scene.height(), resolved.passes, &resolved.render)?;
-    for w in &resolved.warnings {
-        eprintln!("warning: {w}");
-    }
     let method = resolved.render.method.name();
     let source = if args.job.integrator.is_none() {
         " (the scene's <integrator>)"

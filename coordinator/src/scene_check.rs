@@ -58,7 +58,7 @@ pub fn check(scene: &Path, root: &Path, settings: &JobSettings) -> Result<Checke
         height: loaded.height(),
         total: resolved.passes.expect("closed-ended resolution has a count"),
         render: resolved.render,
-        warnings: loaded.warnings.into_iter().chain(resolved.warnings).collect(),
+        warnings: loaded.warnings,
     })
 }
 
