@@ -399,12 +399,7 @@ fn accept_bundle(
     let sum = Accumulator::empty(checked.width, checked.height, window);
     let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
     if !stored.exists() {
-        std::fs::rename(archive, &stored).map_err(storage_error)?;
-        if let Some(parent) = stored.parent()
-            && let Ok(d) = std::fs::File::open(parent)
-        {
-            let _ = d.sync_all();
-        }
+        crate::store::rename_durably(archive, &stored).map_err(storage_error)?;
     }
     if !dir.exists() {
         let _ = std::fs::rename(&files_dir, &dir);
@@ -597,7 +592,7 @@ async fn result(
             // A slot only now that the body is here: a stalled body never holds one.
             let slot = state.result_slots.acquire().await.map_err(ApiError::internal)?;
             let st = state.clone();
-            let out = blocking(move || store_result(&st, id, &key, expected, encoding, len)).await;
+            let out = blocking(move || store_result(&st, id, &key, expected, batch, encoding, len)).await;
             drop(slot);
             out
         }
@@ -686,21 +681,17 @@ impl From<crate::store::StoreError> for StorageFailure {
     }
 }
 
-/// Decodes, checks and keeps a received result, counts it, and merges it (writing any
-/// checkpoint).
+/// Decodes, checks and keeps a received result (`batch`, of lease `id`), counts it, and merges
+/// it (writing any checkpoint).
 fn store_result(
     state: &AppState,
     id: u64,
     key: &str,
     expected: crate::farm::Expected,
+    batch: StoredBatch,
     encoding: Encoding,
     len: u64,
 ) -> ApiResult<()> {
-    let batch = StoredBatch {
-        start: expected.start,
-        end: expected.end,
-        lease: id,
-    };
     let body = std::fs::read(state.layout.received_path(expected.job, batch)).map_err(storage_error)?;
     // Odd passes in [start, end): those the odd-pass sample, if sent, must hold.
     let odd_passes = expected.end / 2 - expected.start / 2;

@@ -79,10 +79,16 @@ pub struct BoundedListener {
 impl BoundedListener {
     /// Wraps `inner`: each connection closed after `limits.idle` of silence or when a request
     /// head takes longer than `limits.head`.
+    /// Caps of 0 count as 1 (a listener that admits nobody would only hang its clients).
     pub fn new(inner: TcpListener, limits: ConnectionLimits) -> BoundedListener {
+        let limits = ConnectionLimits {
+            max: limits.max.max(1),
+            per_peer: limits.per_peer.max(1),
+            ..limits
+        };
         BoundedListener {
             inner,
-            slots: Arc::new(Semaphore::new(limits.max.max(1))),
+            slots: Arc::new(Semaphore::new(limits.max)),
             peers: Arc::default(),
             limits,
         }
@@ -92,7 +98,7 @@ impl BoundedListener {
     fn admit(&self, peer: Peer) -> Option<PeerSlot> {
         let mut counts = self.peers.lock().unwrap_or_else(|p| p.into_inner());
         let n = counts.entry(peer).or_insert(0);
-        if *n >= self.limits.per_peer.max(1) {
+        if *n >= self.limits.per_peer {
             return None;
         }
         *n += 1;

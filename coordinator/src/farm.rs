@@ -1021,15 +1021,19 @@ mod tests {
         farm.lease(&req).unwrap()
     }
 
-    /// The job's state and message after the coordinator restarts on the same folder.
-    fn after_restart(farm: Farm, dir: &std::path::Path, job: u64) -> (JobState, Option<String>) {
+    /// The coordinator restarted on the same folder.
+    fn restarted(farm: Farm, dir: &std::path::Path) -> Farm {
         drop(farm);
         let config = FarmConfig {
             limits: Limits::for_memory(1 << 30),
             ..FarmConfig::default()
         };
-        let farm = Farm::open(Store::open(dir).unwrap(), config).unwrap();
-        let status = farm.status(job).unwrap();
+        Farm::open(Store::open(dir).unwrap(), config).unwrap()
+    }
+
+    /// The job's state and message after the coordinator restarts on the same folder.
+    fn after_restart(farm: Farm, dir: &std::path::Path, job: u64) -> (JobState, Option<String>) {
+        let status = restarted(farm, dir).status(job).unwrap();
         (status.state, status.message)
     }
 
@@ -1120,12 +1124,7 @@ mod tests {
         assert!(farm.store().has_batch(job, stored(&honest)).unwrap());
         assert!(!farm.store().has_batch(job, stored(&late)).unwrap());
         // After a restart the job is made of b's result, not a's.
-        drop(farm);
-        let config = FarmConfig {
-            limits: Limits::for_memory(1 << 30),
-            ..FarmConfig::default()
-        };
-        let farm = Farm::open(Store::open(dir.path()).unwrap(), config).unwrap();
+        let farm = restarted(farm, dir.path());
         assert_eq!(farm.status(job).unwrap().state, JobState::Done);
         let prefix = farm.layout().load_prefix(job, 4, 4).unwrap();
         assert!(

@@ -87,15 +87,16 @@ impl ConnectionArgs {
         }
     }
 
+    /// The limits as given ([`ConnectionArgs::checked`] refuses zeros; the defaults have none).
     fn limits(&self) -> ServingLimits {
         ServingLimits {
             connections: ConnectionLimits {
-                max: self.max_connections.max(1),
-                per_peer: self.max_connections_per_peer.max(1),
-                idle: Duration::from_secs(self.idle_timeout.max(1)),
-                head: Duration::from_secs(self.header_timeout.max(1)),
+                max: self.max_connections,
+                per_peer: self.max_connections_per_peer,
+                idle: Duration::from_secs(self.idle_timeout),
+                head: Duration::from_secs(self.header_timeout),
             },
-            body_timeout: Duration::from_secs(self.body_timeout.max(1)),
+            body_timeout: Duration::from_secs(self.body_timeout),
         }
     }
 }
@@ -139,12 +140,5 @@ async fn busy(req: Request, next: Next) -> Response {
 
 /// Whether a body error is the body timeout's (the client stalled), not a malformed body.
 pub fn is_stall(e: &(dyn std::error::Error + 'static)) -> bool {
-    let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
-    while let Some(err) = cur {
-        if err.is::<tower_http::timeout::TimeoutError>() {
-            return true;
-        }
-        cur = err.source();
-    }
-    false
+    std::iter::successors(Some(e), |e| e.source()).any(|e| e.is::<tower_http::timeout::TimeoutError>())
 }

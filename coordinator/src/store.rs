@@ -167,9 +167,22 @@ fn write_durably_as(path: &Path, bytes: &[u8], tag: u64) -> Result<(), StoreErro
         .map_err(io(&tmp))?;
     f.write_all(bytes).map_err(io(&tmp))?;
     f.sync_all().map_err(io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(io(path))?;
+    rename_durably(&tmp, path)
+}
+
+/// Makes the entries of folder `dir` durable (a rename into it, a new file or folder in it).
+/// Best effort: a file system that cannot sync a folder keeps its entries its own way.
+pub fn sync_dir(dir: &Path) {
     if let Ok(d) = std::fs::File::open(dir) {
         let _ = d.sync_all();
+    }
+}
+
+/// Renames `from` to `to` and makes the rename durable.
+pub fn rename_durably(from: &Path, to: &Path) -> Result<(), StoreError> {
+    std::fs::rename(from, to).map_err(io(to))?;
+    if let Some(dir) = to.parent() {
+        sync_dir(dir);
     }
     Ok(())
 }
@@ -230,12 +243,7 @@ impl Layout {
     /// Makes a received (and already durable) result the stored batch, before its row is
     /// recorded under the lock.
     pub fn keep_received(&self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
-        let path = self.batch_path(job, b);
-        std::fs::rename(self.received_path(job, b), &path).map_err(io(&path))?;
-        if let Ok(d) = std::fs::File::open(self.job_dir(job)) {
-            let _ = d.sync_all();
-        }
-        Ok(())
+        rename_durably(&self.received_path(job, b), &self.batch_path(job, b))
     }
 
     /// Stores a job's prefix (passes [0, N) summed) durably, with its odd passes' sample if
@@ -425,9 +433,7 @@ impl Store {
         // any batch arrived had none.
         let folder = self.layout.job_dir(id);
         std::fs::create_dir_all(&folder).map_err(io(&folder))?;
-        if let Ok(d) = std::fs::File::open(self.layout.dir.join("jobs")) {
-            let _ = d.sync_all();
-        }
+        sync_dir(&self.layout.dir.join("jobs"));
         Ok(id)
     }
 

@@ -235,7 +235,7 @@ async fn lease(State(relay): State<Arc<Relay>>, req: Request) -> RelayResult<Res
             let now = relay.now();
             let mut book = relay.book();
             book.add_batch(up, now);
-            match book.take(relay.new_key(), relay.now()) {
+            match book.take(relay.new_key(), now) {
                 Some(l) => Ok(Json(l).into_response()),
                 None => Ok(StatusCode::NO_CONTENT.into_response()),
             }

@@ -1,12 +1,10 @@
 //! `<integrator>`: reduced to the method of ours that renders it, with its parameters typed.
 
+use super::Builder;
 use crate::job::Integrator;
-use crate::scene::IntegratorDecl;
 use crate::scene::props::{Props, Res};
 use crate::scene::xml::Element;
-
-use super::Builder;
-use crate::scene::{MethodParams, SppmParams};
+use crate::scene::{IntegratorDecl, MethodParams, SppmParams};
 
 impl Builder<'_> {
     /// `<integrator>`, reduced to the method of ours that renders it: `path` (Mitsuba's `path`,
