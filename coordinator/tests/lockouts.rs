@@ -85,6 +85,25 @@ async fn legitimate_wait(url: &str, token: &str) -> Duration {
     start.elapsed()
 }
 
+/// Under `idle` silent sockets from 127.0.0.2 and an attacker reconnecting from there for
+/// `attack`, a legitimate client is answered within [`SERVED_WITHIN`], three times `pause`
+/// apart.
+async fn served_under_idle_sockets(url: &str, token: &str, idle: usize, attack: Duration, pause: Duration) {
+    let to = addr_of(url);
+    let _idle = idle_sockets("127.0.0.2", to, idle).await;
+    let attacker = reconnecting_attacker("127.0.0.2", to, Instant::now() + attack);
+    for _ in 0..3 {
+        let waited = legitimate_wait(url, token).await;
+        eprintln!("{url}: a legitimate client waited {waited:?}");
+        assert!(
+            waited < SERVED_WITHIN,
+            "waited {waited:?} under {idle} idle sockets"
+        );
+        tokio::time::sleep(pause).await;
+    }
+    attacker.await.unwrap();
+}
+
 /// Whether the service closes `s` (or answers it) within `within`, writing `keepalive`
 /// every 500 ms meanwhile (nothing if empty).
 async fn closed_within(s: &mut TcpStream, keepalive: &[u8], within: Duration) -> bool {
@@ -94,10 +113,12 @@ async fn closed_within(s: &mut TcpStream, keepalive: &[u8], within: Duration) ->
         if !keepalive.is_empty() && s.write_all(keepalive).await.is_err() {
             return true;
         }
-        match tokio::time::timeout(Duration::from_millis(500), s.read(&mut buf)).await {
-            Ok(Ok(0)) | Ok(Err(_)) => return true,
-            Ok(Ok(_)) => return true,
-            Err(_) => {}
+        // Closed (0 bytes or an error) or answered: either way the service let go of it.
+        if tokio::time::timeout(Duration::from_millis(500), s.read(&mut buf))
+            .await
+            .is_ok()
+        {
+            return true;
         }
     }
     false
@@ -124,17 +145,15 @@ async fn idle_sockets_of_one_peer_do_not_lock_others_out() {
             "2",
         ],
     );
-    let to = addr_of(&url);
-    let mut crlf = idle_sockets("127.0.0.3", to, 2).await;
-    let _idle = idle_sockets("127.0.0.2", to, 200).await;
-    let attacker = reconnecting_attacker("127.0.0.2", to, Instant::now() + Duration::from_secs(3));
-    for _ in 0..3 {
-        let waited = legitimate_wait(&url, TOKEN).await;
-        eprintln!("a legitimate client waited {waited:?}");
-        assert!(waited < SERVED_WITHIN, "waited {waited:?} under 200 idle sockets");
-        tokio::time::sleep(Duration::from_millis(800)).await;
-    }
-    attacker.await.unwrap();
+    let mut crlf = idle_sockets("127.0.0.3", addr_of(&url), 2).await;
+    served_under_idle_sockets(
+        &url,
+        TOKEN,
+        200,
+        Duration::from_secs(3),
+        Duration::from_millis(800),
+    )
+    .await;
     // Empty lines every 500 ms: idle, so closed after the 3 s idle timeout.
     for s in &mut crlf {
         assert!(
@@ -284,18 +303,13 @@ async fn a_relay_holds_the_coordinators_limits() {
     assert!(answer.starts_with("HTTP/1.1 413"), "{answer}");
     eprintln!("a 64 MB release body was refused in {:?}", start.elapsed());
 
-    let _idle = idle_sockets("127.0.0.2", addr_of(&relay_url), 300).await;
-    let attacker = reconnecting_attacker(
-        "127.0.0.2",
-        addr_of(&relay_url),
-        Instant::now() + Duration::from_secs(2),
-    );
-    for _ in 0..3 {
-        let waited = legitimate_wait(&relay_url, WORKER_TOKEN).await;
-        eprintln!("a relay's legitimate client waited {waited:?}");
-        assert!(waited < SERVED_WITHIN, "waited {waited:?} under 300 idle sockets");
-        tokio::time::sleep(Duration::from_millis(700)).await;
-    }
-    attacker.await.unwrap();
+    served_under_idle_sockets(
+        &relay_url,
+        WORKER_TOKEN,
+        300,
+        Duration::from_secs(2),
+        Duration::from_millis(700),
+    )
+    .await;
     assert!(relay.0.try_wait().unwrap().is_none(), "the relay died");
 }
