@@ -277,6 +277,42 @@ fn nonsense_values() {
 }
 
 #[test]
+fn bad_bump_and_normal_maps() {
+    expect_error(
+        &scene_text(
+            "<bsdf type=\"normalmap\" id=\"n\"><bsdf type=\"diffuse\"/></bsdf>",
+            FILM,
+        ),
+        8,
+        "normalmap needs a <texture name=\"normalmap\">",
+    );
+    expect_error(
+        &scene_text(
+            "<bsdf type=\"bumpmap\" id=\"b\">\n<texture type=\"checkerboard\"/><bsdf type=\"diffuse\"/></bsdf>",
+            FILM,
+        ),
+        9,
+        "bumpmap needs a bitmap texture",
+    );
+    expect_error(
+        &scene_text(
+            "<bsdf type=\"bumpmap\" id=\"b\"><bsdf type=\"diffuse\"/></bsdf>",
+            FILM,
+        ),
+        8,
+        "bumpmap needs one nested texture, not 0",
+    );
+    expect_error(
+        &scene_text(
+            "<bsdf type=\"normalmap\" id=\"n\"><texture type=\"checkerboard\" name=\"normalmap\"/></bsdf>",
+            FILM,
+        ),
+        8,
+        "normalmap needs one nested bsdf, not 0",
+    );
+}
+
+#[test]
 fn bad_media() {
     expect_error(
         &scene_text(

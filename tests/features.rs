@@ -6,7 +6,8 @@
 //!   blendbsdf, twosided with distinct sides;
 //! - `lights.xml`: spot, point and disk area lights, a thin-lens camera, a named glass IOR;
 //! - `meshes.xml`: PLY with vertex normals (and with `face_normals`), OBJ quads, `matrix`;
-//! - `mirrored.xml`: rectangles, a disk and a cube under mirroring transforms.
+//! - `mirrored.xml`: rectangles, a disk and a cube under mirroring transforms;
+//! - `bumpy.xml`: normal and bump maps on rectangles and spheres, one inside `twosided`.
 //!
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
@@ -42,6 +43,14 @@ fn lights_and_thin_lens_match_mitsuba() {
 #[test]
 fn mirrored_rectangles_disks_and_cubes_face_as_in_mitsuba() {
     check("mirrored");
+}
+
+/// `bumpy.xml`: normal maps (a floor inside `twosided`, a sphere whose tangent frame follows its
+/// ∂p/∂u) and bump maps (a wall, and a sphere whose slopes scale by its ∂p/∂u and ∂p/∂v), lit
+/// at grazing angles where Mitsuba's normal flip and shadow terminator term show.
+#[test]
+fn bump_and_normal_maps_match_mitsuba() {
+    check("bumpy");
 }
 
 #[test]

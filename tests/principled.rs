@@ -80,7 +80,7 @@ fn every_mitsuba_parameter_is_accepted() {
     // specular ↦ eta as Mitsuba maps it: 2 / (1 − √(0.08 · specular)) − 1.
     assert!((p.eta - (2.0 / (1.0 - (0.08f32 * 0.6).sqrt()) - 1.0)).abs() < 1e-6);
     assert_eq!(p.clearcoat_sampling_rate, 0.25);
-    assert!(Bsdf::Principled(Box::new(p.clone())).is_anisotropic());
+    assert!(Bsdf::Principled(Box::new(p.clone())).needs_tangent_frame());
 
     let textured = with_principled(
         r#"
@@ -117,7 +117,7 @@ fn every_mitsuba_parameter_is_accepted() {
         (1.0, 1.0, 1.0)
     );
     assert!(Bsdf::Principled(Box::new(p.clone())).gathers_photons());
-    assert!(!Bsdf::Principled(Box::new(p.clone())).is_anisotropic());
+    assert!(!Bsdf::Principled(Box::new(p.clone())).needs_tangent_frame());
 
     // Index-matched transmission is nudged as Mitsuba nudges it.
     let matched =

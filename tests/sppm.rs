@@ -113,6 +113,12 @@ fn bad_parameters_are_refused() {
 
 /// Textured materials (bitmaps and checkerboards on colours, roughness and a blend weight):
 /// photons and the camera pass read the same textures at the same (u, v).
+/// Photons gathered on normal- and bump-mapped surfaces, against the path-traced reference.
+#[test]
+fn bump_and_normal_maps_sppm_converge_to_mitsuba() {
+    check_sppm_convergence("bumpy");
+}
+
 #[test]
 fn textures_sppm_converges_to_mitsuba() {
     check_sppm_convergence("textures");

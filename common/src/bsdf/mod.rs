@@ -7,6 +7,7 @@ mod dielectric;
 mod diffuse;
 pub mod fresnel;
 pub mod microfacet;
+mod perturbed;
 mod plastic;
 mod principled;
 mod rough_dielectric;
@@ -16,6 +17,7 @@ pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use microfacet::{AnisotropicGgx, Distribution, Microfacet, Roughness};
+pub use perturbed::{Perturbation, Perturbed};
 pub use plastic::Plastic;
 pub use principled::{Principled, eta_from_specular};
 pub use rough_dielectric::RoughDielectric;
@@ -24,7 +26,43 @@ pub use thin_dielectric::ThinDielectric;
 use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
+use crate::geometry::Frame;
 use crate::texture::Param;
+
+/// Where a material is evaluated: its texture coordinates, and the surface around the point in
+/// world space, which bump and normal maps tilt the shading frame by. Directions given to a
+/// BSDF are local to `frame`.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceAt {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// The shading frame the directions are local to.
+    pub frame: Frame,
+    /// ∂p/∂u, with its length (a bump map's slope is relative to it).
+    pub dpdu: Vec3A,
+    /// ∂p/∂v, with its length.
+    pub dpdv: Vec3A,
+    /// The geometric normal.
+    pub ng: Vec3A,
+}
+
+impl SurfaceAt {
+    /// A flat surface in the xy plane, facing +z, parameterised by x and y: for materials
+    /// tested on their own.
+    pub const fn flat(uv: Vec2) -> SurfaceAt {
+        SurfaceAt {
+            uv,
+            frame: Frame {
+                s: Vec3A::X,
+                t: Vec3A::Y,
+                n: Vec3A::Z,
+            },
+            dpdu: Vec3A::X,
+            dpdv: Vec3A::Y,
+            ng: Vec3A::Z,
+        }
+    }
+}
 
 /// Which quantity a path carries: camera paths carry radiance, photons carry importance's
 /// adjoint (power). Refraction scales the two differently.
@@ -78,12 +116,22 @@ pub enum Bsdf {
     /// No surface at all (Mitsuba's `null`): the boundary of a medium, which rays cross
     /// unchanged.
     Null,
+    /// A material seen through a shading frame tilted by a normal or bump map.
+    Perturbed(Box<Perturbed>),
 }
 
 impl Bsdf {
     /// Samples `wo` given `wi` at texture coordinates `uv`. `u1` chooses a lobe, `u2` the
     /// direction within it.
-    pub fn sample(&self, uv: Vec2, wi: Vec3A, u1: f32, u2: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    pub fn sample(
+        &self,
+        at: &SurfaceAt,
+        wi: Vec3A,
+        u1: f32,
+        u2: Vec2,
+        mode: TransportMode,
+    ) -> Option<BsdfSample> {
+        let uv = at.uv;
         match self {
             Bsdf::Diffuse(b) => b.sample(uv, wi, u2),
             Bsdf::Conductor(b) => b.sample(uv, wi, u2),
@@ -95,7 +143,7 @@ impl Bsdf {
                 let opacity = m.1.at(uv).clamp(0.0, 1.0);
                 if u1 < opacity {
                     let s =
-                        m.0.sample(uv, wi, (u1 / opacity).min(1.0 - f32::EPSILON), u2, mode)?;
+                        m.0.sample(at, wi, (u1 / opacity).min(1.0 - f32::EPSILON), u2, mode)?;
                     // The choice's probability cancels against the opacity in the weight.
                     Some(BsdfSample {
                         pdf: s.pdf * opacity,
@@ -112,6 +160,7 @@ impl Bsdf {
                 }
             }
             Bsdf::Principled(b) => b.sample(uv, wi, u1, u2, mode),
+            Bsdf::Perturbed(b) => b.sample(at, wi, u1, u2, mode),
             Bsdf::Null => Some(BsdfSample {
                 wo: -wi,
                 weight: Rgb::ONE,
@@ -127,25 +176,25 @@ impl Bsdf {
                 } else {
                     (second, u1 / w)
                 };
-                let s = chosen.sample(uv, wi, u1.min(1.0 - f32::EPSILON), u2, mode)?;
+                let s = chosen.sample(at, wi, u1.min(1.0 - f32::EPSILON), u2, mode)?;
                 if s.delta {
                     // The choice probability cancels against the blend weight.
                     return Some(s);
                 }
                 // A smooth direction could have come from either lobe: use the mixture density.
-                let pdf = self.pdf(uv, wi, s.wo);
+                let pdf = self.pdf(at, wi, s.wo);
                 (pdf > 0.0).then(|| BsdfSample {
-                    weight: self.eval_mode(uv, wi, s.wo, mode) / pdf,
+                    weight: self.eval_mode(at, wi, s.wo, mode) / pdf,
                     pdf,
                     ..s
                 })
             }
             Bsdf::TwoSided(pair) => {
                 if wi.z >= 0.0 {
-                    pair.0.sample(uv, wi, u1, u2, mode)
+                    pair.0.sample(at, wi, u1, u2, mode)
                 } else {
                     let flip = Vec3A::new(1.0, 1.0, -1.0);
-                    let s = pair.1.sample(uv, wi * flip, u1, u2, mode)?;
+                    let s = pair.1.sample(at, wi * flip, u1, u2, mode)?;
                     Some(BsdfSample { wo: s.wo * flip, ..s })
                 }
             }
@@ -156,56 +205,60 @@ impl Bsdf {
     /// sampling and photon gathering): where refraction treats the two transport modes
     /// differently (the principled's transmission), [`Bsdf::sample`] applies the mode it is
     /// given.
-    pub fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
-        self.eval_mode(uv, wi, wo, TransportMode::Radiance)
+    pub fn eval(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A) -> Rgb {
+        self.eval_mode(at, wi, wo, TransportMode::Radiance)
     }
 
     /// [`Bsdf::eval`] for either transport mode (a particle tracer's connections to the camera
     /// are importance transport).
-    pub fn eval_mode(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
+    pub fn eval_mode(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
+        let uv = at.uv;
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => Rgb::ZERO,
             Bsdf::RoughDielectric(b) => b.eval(uv, wi, wo, mode),
             Bsdf::Plastic(b) => b.eval(uv, wi, wo),
-            Bsdf::Mask(m) => m.0.eval_mode(uv, wi, wo, mode) * m.1.at(uv).clamp(0.0, 1.0),
+            Bsdf::Mask(m) => m.0.eval_mode(at, wi, wo, mode) * m.1.at(uv).clamp(0.0, 1.0),
             Bsdf::Principled(b) => b.eval(uv, wi, wo, mode),
+            Bsdf::Perturbed(b) => b.eval(at, wi, wo, mode),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
-                (1.0 - w) * pair.0.eval_mode(uv, wi, wo, mode) + w * pair.1.eval_mode(uv, wi, wo, mode)
+                (1.0 - w) * pair.0.eval_mode(at, wi, wo, mode) + w * pair.1.eval_mode(at, wi, wo, mode)
             }
             Bsdf::TwoSided(pair) => {
                 let flip = Vec3A::new(1.0, 1.0, -1.0);
                 if wi.z >= 0.0 {
-                    pair.0.eval_mode(uv, wi, wo, mode)
+                    pair.0.eval_mode(at, wi, wo, mode)
                 } else {
-                    pair.1.eval_mode(uv, wi * flip, wo * flip, mode)
+                    pair.1.eval_mode(at, wi * flip, wo * flip, mode)
                 }
             }
         }
     }
 
     /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes at `uv`.
-    pub fn pdf(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> f32 {
+    pub fn pdf(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A) -> f32 {
+        let uv = at.uv;
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
             Bsdf::Conductor(b) => b.pdf(uv, wi, wo),
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => 0.0,
             Bsdf::RoughDielectric(b) => b.pdf(uv, wi, wo),
             Bsdf::Plastic(b) => b.pdf(wi, wo),
-            Bsdf::Mask(m) => m.0.pdf(uv, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
+            Bsdf::Mask(m) => m.0.pdf(at, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
             Bsdf::Principled(b) => b.pdf(uv, wi, wo),
+            Bsdf::Perturbed(b) => b.pdf(at, wi, wo),
             Bsdf::Blend(pair, w) => {
                 let w = w.at(uv).clamp(0.0, 1.0);
-                (1.0 - w) * pair.0.pdf(uv, wi, wo) + w * pair.1.pdf(uv, wi, wo)
+                (1.0 - w) * pair.0.pdf(at, wi, wo) + w * pair.1.pdf(at, wi, wo)
             }
             Bsdf::TwoSided(pair) => {
                 let flip = Vec3A::new(1.0, 1.0, -1.0);
                 if wi.z >= 0.0 {
-                    pair.0.pdf(uv, wi, wo)
+                    pair.0.pdf(at, wi, wo)
                 } else {
-                    pair.1.pdf(uv, wi * flip, wo * flip)
+                    pair.1.pdf(at, wi * flip, wo * flip)
                 }
             }
         }
@@ -228,16 +281,21 @@ impl Bsdf {
                 pair.0.gathers_photons() || pair.1.gathers_photons()
             }
             Bsdf::Mask(m) => m.0.gathers_photons(),
+            Bsdf::Perturbed(b) => b.nested.gathers_photons(),
         }
     }
 
     /// Whether the material depends on the orientation of the shading frame about the normal
-    /// (anisotropic roughness): only then is the frame's first tangent aligned with the
-    /// surface's ∂p/∂u, as Mitsuba aligns it.
-    pub fn is_anisotropic(&self) -> bool {
+    /// (anisotropic roughness, a normal map's tangent space): only then is the frame's first
+    /// tangent aligned with the surface's ∂p/∂u, as Mitsuba aligns it.
+    pub fn needs_tangent_frame(&self) -> bool {
         match self {
             Bsdf::Principled(b) => b.is_anisotropic(),
-            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.is_anisotropic() || pair.1.is_anisotropic(),
+            Bsdf::Perturbed(_) => true,
+            Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
+                pair.0.needs_tangent_frame() || pair.1.needs_tangent_frame()
+            }
+            Bsdf::Mask(m) => m.0.needs_tangent_frame(),
             _ => false,
         }
     }
@@ -251,6 +309,7 @@ impl Bsdf {
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_smooth() || pair.1.has_smooth(),
             Bsdf::Mask(m) => m.0.has_smooth(),
+            Bsdf::Perturbed(b) => b.nested.has_smooth(),
         }
     }
 
@@ -263,6 +322,7 @@ impl Bsdf {
             Bsdf::Conductor(c) => c.roughness.is_none(),
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Mask(_) => true,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_delta() || pair.1.has_delta(),
+            Bsdf::Perturbed(b) => b.nested.has_delta(),
         }
     }
 

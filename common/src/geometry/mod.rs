@@ -55,9 +55,11 @@ pub struct SurfacePoint {
     pub shape: u32,
     /// Texture coordinates, parameterised as Mitsuba's shapes are.
     pub uv: glam::Vec2,
-    /// ∂p/∂u as Mitsuba's shapes give it (direction only; may be zero where the
-    /// parameterisation is singular): anisotropic materials orient their frame by it.
+    /// ∂p/∂u as Mitsuba's shapes give it (may be zero where the parameterisation is
+    /// singular): anisotropic materials orient their frame by it, bump maps scale by it.
     pub dpdu: Vec3A,
+    /// ∂p/∂v, likewise.
+    pub dpdv: Vec3A,
 }
 
 impl SurfacePoint {
@@ -71,6 +73,7 @@ impl SurfacePoint {
             shape: u32::MAX,
             uv: glam::Vec2::ZERO,
             dpdu: Vec3A::ZERO,
+            dpdv: Vec3A::ZERO,
         }
     }
 }

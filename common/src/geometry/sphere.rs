@@ -83,8 +83,17 @@ impl Sphere {
             phi * std::f32::consts::FRAC_1_PI * 0.5,
             l.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
         );
-        // Mitsuba's ∂p/∂u: along the longitude, (−y, x, 0) in the sphere's frame.
-        let dpdu = Vec3A::from(self.rotation * glam::Vec3::new(-l.y, l.x, 0.0));
+        // Mitsuba's ∂p/∂u and ∂p/∂v (sphere.cpp): 2π r (−y, x, 0) and π r (z cos φ, z sin φ,
+        // −sin θ) in the sphere's frame, ∂p/∂v along x at the poles.
+        let tau_r = 2.0 * std::f32::consts::PI * self.radius;
+        let dpdu = Vec3A::from(self.rotation * glam::Vec3::new(-l.y, l.x, 0.0)) * tau_r;
+        let rd = (l.x * l.x + l.y * l.y).sqrt();
+        let dpdv_local = if rd > 0.0 {
+            glam::Vec3::new(l.z * l.x / rd, l.z * l.y / rd, -rd)
+        } else {
+            glam::Vec3::X
+        };
+        let dpdv = Vec3A::from(self.rotation * dpdv_local) * (0.5 * tau_r);
         let n = if self.flip { -n } else { n };
         SurfacePoint {
             p,
@@ -94,6 +103,7 @@ impl Sphere {
             shape: self.shape,
             uv,
             dpdu,
+            dpdv,
         }
     }
 }

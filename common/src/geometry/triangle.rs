@@ -77,9 +77,9 @@ impl Triangle {
             }
             None => ng,
         };
-        let (uv, dpdu) = match &self.uv {
-            Some(t) => (b0 * t[0] + b1 * t[1] + b2 * t[2], self.dpdu(t)),
-            None => (Vec2::new(b1, b2), p1 - p0),
+        let (uv, (dpdu, dpdv)) = match &self.uv {
+            Some(t) => (b0 * t[0] + b1 * t[1] + b2 * t[2], self.tangents(t)),
+            None => (Vec2::new(b1, b2), (p1 - p0, p2 - p0)),
         };
         SurfacePoint {
             p,
@@ -89,25 +89,29 @@ impl Triangle {
             shape: self.shape,
             uv,
             dpdu,
+            dpdv,
         }
     }
 
-    /// ∂p/∂u from the vertex texture coordinates, as Mitsuba computes it (for a degenerate
-    /// parameterisation, the first tangent of the unflipped geometric normal's basis).
-    fn dpdu(&self, t: &[Vec2; 3]) -> Vec3A {
+    /// ∂p/∂u and ∂p/∂v from the vertex texture coordinates, as Mitsuba computes them (for a
+    /// degenerate parameterisation, the tangents of the unflipped geometric normal's basis).
+    fn tangents(&self, t: &[Vec2; 3]) -> (Vec3A, Vec3A) {
         let [p0, p1, p2] = self.p;
         let (dp0, dp1) = (p1 - p0, p2 - p0);
         let (duv0, duv1) = (t[1] - t[0], t[2] - t[0]);
         let det = duv0.x * duv1.y - duv0.y * duv1.x;
         if det == 0.0 {
             let n = dp0.cross(dp1).normalize_or_zero();
-            return if n == Vec3A::ZERO {
-                Vec3A::ZERO
-            } else {
-                super::Frame::from_normal(n).s
-            };
+            if n == Vec3A::ZERO {
+                return (Vec3A::ZERO, Vec3A::ZERO);
+            }
+            let f = super::Frame::from_normal(n);
+            return (f.s, f.t);
         }
-        (duv1.y * dp0 - duv0.y * dp1) / det
+        (
+            (duv1.y * dp0 - duv0.y * dp1) / det,
+            (duv0.x * dp1 - duv1.x * dp0) / det,
+        )
     }
 }
 

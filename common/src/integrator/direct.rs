@@ -63,7 +63,7 @@ pub fn light_sample(
         return Rgb::ZERO;
     };
     let wl = hit.frame.to_local(ls.wi);
-    let f = hit.bsdf.eval(sp.uv, hit.wo_local, wl);
+    let f = hit.bsdf.eval(&hit.at(), hit.wo_local, wl);
     if f == Rgb::ZERO {
         return Rgb::ZERO;
     }
@@ -73,7 +73,7 @@ pub fn light_sample(
         return Rgb::ZERO;
     }
     let w = if bsdf_share > 0.0 && !ls.delta {
-        mis_weight(ls.pdf, bsdf_share * hit.bsdf.pdf(sp.uv, hit.wo_local, wl))
+        mis_weight(ls.pdf, bsdf_share * hit.bsdf.pdf(&hit.at(), hit.wo_local, wl))
     } else {
         1.0
     };

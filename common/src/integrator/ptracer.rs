@@ -86,7 +86,7 @@ pub fn trace_light_path(
                         let wc = hit.frame.to_local(to_camera);
                         let f = hit
                             .bsdf
-                            .eval_mode(sp.uv, hit.wo_local, wc, TransportMode::Importance);
+                            .eval_mode(&hit.at(), hit.wo_local, wc, TransportMode::Importance);
                         splat(at, walk.beta * f * value);
                     }
                 }

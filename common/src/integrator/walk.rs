@@ -12,7 +12,7 @@
 use glam::Vec3A;
 
 use super::direct::PreviousBounce;
-use crate::bsdf::{Bsdf, BsdfSample, TransportMode};
+use crate::bsdf::{Bsdf, BsdfSample, SurfaceAt, TransportMode};
 use crate::color::Rgb;
 use crate::geometry::{Frame, Ray, SurfacePoint, offset_ray_origin};
 use crate::medium::Flight;
@@ -78,7 +78,7 @@ impl<'s> Hit<'s> {
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
         // Isotropic materials do not depend on the tangents' orientation: the cheaper basis.
-        let frame = if bsdf.is_anisotropic() {
+        let frame = if bsdf.needs_tangent_frame() {
             Frame::from_normal_and_tangent(sp.ns, sp.dpdu)
         } else {
             Frame::from_normal(sp.ns)
@@ -91,6 +91,19 @@ impl<'s> Hit<'s> {
             frame,
             wo,
             wo_local,
+        }
+    }
+
+    /// Where its material is evaluated (made on demand: kept in the hit, it would double the
+    /// size of every [`Event`]).
+    #[inline]
+    pub fn at(&self) -> SurfaceAt {
+        SurfaceAt {
+            uv: self.sp.uv,
+            frame: self.frame,
+            dpdu: self.sp.dpdu,
+            dpdv: self.sp.dpdv,
+            ng: self.sp.ng,
         }
     }
 }
@@ -243,7 +256,7 @@ impl Walk {
     pub fn sample_bsdf(hit: &Hit, sampler: &mut Sampler, mode: TransportMode) -> Option<BsdfSample> {
         let u1 = sampler.next_1d();
         let u2 = sampler.next_2d();
-        hit.bsdf.sample(hit.sp.uv, hit.wo_local, u1, u2, mode)
+        hit.bsdf.sample(&hit.at(), hit.wo_local, u1, u2, mode)
     }
 
     /// Bounces off `hit` along the sampled direction: the throughput takes the sample's

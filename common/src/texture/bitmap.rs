@@ -5,7 +5,7 @@ use std::path::Path;
 
 use glam::{Affine2, Vec2};
 
-use crate::color::Rgb;
+use crate::color::{Rgb, luminance};
 
 /// How texels are interpolated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -154,6 +154,30 @@ impl Bitmap {
             }
         }
     }
+
+    /// The gradient of the luminance with respect to (u, v), as Mitsuba's `eval_1_grad` gives
+    /// it (a bump map's slope): the derivative of the bilinear interpolant, zero under nearest
+    /// filtering, and the texture's resolution applied after `to_uv`'s linear part (exact for
+    /// the diagonal `to_uv` scenes use).
+    pub fn gradient(&self, uv: Vec2) -> Vec2 {
+        if self.filter == Filter::Nearest {
+            return Vec2::ZERO;
+        }
+        let size = Vec2::new(self.width as f32, self.height as f32);
+        let p = self.to_uv.transform_point2(uv) * size - 0.5;
+        let p0 = p.floor();
+        let w1 = p - p0;
+        let w0 = Vec2::ONE - w1;
+        let (x, y) = (p0.x as i64, p0.y as i64);
+        let lum = |x, y| luminance(self.texel(x, y));
+        let (f00, f10, f01, f11) = (lum(x, y), lum(x + 1, y), lum(x, y + 1), lum(x + 1, y + 1));
+        let d = Vec2::new(
+            w0.y * (f10 - f00) + w1.y * (f11 - f01),
+            w0.x * (f01 - f00) + w1.x * (f11 - f10),
+        );
+        let m = self.to_uv.matrix2;
+        size * Vec2::new(m.x_axis.dot(d), m.y_axis.dot(d))
+    }
 }
 
 /// A texel index wrapped into 0..n.
@@ -192,6 +216,32 @@ mod tests {
         assert_eq!(n.eval(Vec2::new(0.49, 0.0)), Rgb::ZERO);
         assert_eq!(n.eval(Vec2::new(1.51, 0.0)), Rgb::ONE);
         assert!((b.mean().x - 0.5).abs() < 1e-6);
+    }
+
+    /// The gradient is the bilinear interpolant's: against central differences of `eval`
+    /// inside a texel cell, through a scaling `to_uv` and over a repeated edge.
+    #[test]
+    fn the_gradient_is_the_interpolants_derivative() {
+        let texels = [0.1, 0.7, 0.3, 0.9, 0.2, 0.5].map(Rgb::splat).to_vec();
+        let to_uv = Affine2::from_scale(Vec2::new(2.0, 3.0));
+        let b = Bitmap::from_texels(3, 2, texels, Filter::Bilinear, Wrap::Repeat, to_uv);
+        let lum = |uv: Vec2| luminance(b.eval(uv)) as f64;
+        for uv in [Vec2::new(0.07, 0.11), Vec2::new(0.31, 0.02), Vec2::new(0.49, 0.3)] {
+            let h = 1e-3;
+            let du = (lum(uv + Vec2::new(h, 0.0)) - lum(uv - Vec2::new(h, 0.0))) / (2.0 * h as f64);
+            let dv = (lum(uv + Vec2::new(0.0, h)) - lum(uv - Vec2::new(0.0, h))) / (2.0 * h as f64);
+            let g = b.gradient(uv);
+            assert!(
+                (g.x as f64 - du).abs() < 2e-2 * du.abs().max(1.0),
+                "{uv}: {g} vs {du}"
+            );
+            assert!(
+                (g.y as f64 - dv).abs() < 2e-2 * dv.abs().max(1.0),
+                "{uv}: {g} vs {dv}"
+            );
+        }
+        let n = two_by_one(Filter::Nearest, Wrap::Repeat);
+        assert_eq!(n.gradient(Vec2::new(0.3, 0.5)), Vec2::ZERO);
     }
 
     #[test]

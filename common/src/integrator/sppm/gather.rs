@@ -143,7 +143,7 @@ fn photon_estimate(ctx: &GatherContext, hit: &Hit) -> Rgb {
             return;
         }
         // eval includes |cos| of the photon's direction; the photon's power already does.
-        let f = hit.bsdf.eval(sp.uv, hit.wo_local, local) / local.z.abs();
+        let f = hit.bsdf.eval(&hit.at(), hit.wo_local, local) / local.z.abs();
         sum += f * ph.power() * (1.0 - d2.sqrt() * inv_kr);
     });
     let norm = 1.0 - 2.0 / (3.0 * ctx.k);

@@ -1,14 +1,14 @@
 //! `<bsdf>`: every material plugin, its roughness and index of refraction.
 
 use crate::bsdf::{
-    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Plastic, Principled, RoughDielectric,
-    Roughness, ThinDielectric, eta_from_specular,
+    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Perturbation, Perturbed, Plastic,
+    Principled, RoughDielectric, Roughness, ThinDielectric, eta_from_specular,
 };
 use crate::color::Rgb;
 use crate::scene::named;
 use crate::scene::props::{Props, Res};
 use crate::scene::xml::Element;
-use crate::texture::Param;
+use crate::texture::{Param, Texture};
 
 use super::Builder;
 
@@ -135,6 +135,7 @@ impl Builder<'_> {
                 }
             }
             "null" => Bsdf::Null,
+            kind @ ("normalmap" | "bumpmap") => Bsdf::Perturbed(Box::new(self.perturbed(kind, &p)?)),
             "blendbsdf" => {
                 let w = self.float_param(&p, "weight", 0.5)?;
                 if let Param::Fixed(w) = w
@@ -158,13 +159,65 @@ impl Builder<'_> {
                     format!(
                         "bsdf type \"{other}\" is not supported (diffuse, conductor, roughconductor, \
                          dielectric, roughdielectric, thindielectric, plastic, roughplastic, principled, \
-                         twosided, blendbsdf, mask, null)"
+                         twosided, blendbsdf, mask, normalmap, bumpmap, null)"
                     ),
                 ));
             }
         };
         p.finish()?;
         Ok(bsdf)
+    }
+
+    /// Mitsuba's `normalmap` (a texture named `normalmap`) or `bumpmap` (one nested bitmap of
+    /// any name, and its `scale`), each around one nested material.
+    fn perturbed(&mut self, kind: &str, p: &Props) -> Res<Perturbed> {
+        let by = if kind == "normalmap" {
+            let map = self.texture_param(p, "normalmap")?.ok_or_else(|| {
+                self.ctx
+                    .err(p.el, "normalmap needs a <texture name=\"normalmap\">")
+            })?;
+            Perturbation::Normal(map)
+        } else {
+            let mut textures = Vec::new();
+            for el in p.objects("texture") {
+                textures.push((el, std::sync::Arc::new(self.texture(el)?)));
+            }
+            for el in p.objects("ref") {
+                if let Some(t) = el.attr("id").and_then(|id| self.texture_ids.get(id)) {
+                    textures.push((el, t.clone()));
+                }
+            }
+            if textures.len() != 1 {
+                return Err(self.ctx.err(
+                    p.el,
+                    format!("bumpmap needs one nested texture, not {}", textures.len()),
+                ));
+            }
+            let (el, texture) = textures.remove(0);
+            let Texture::Bitmap(height) = &*texture else {
+                return Err(self.ctx.err(
+                    el,
+                    "bumpmap needs a bitmap texture: Mitsuba differentiates no other kind",
+                ));
+            };
+            Perturbation::Bump {
+                height: Box::new(height.clone()),
+                scale: p.float_or("scale", 1.0)?,
+            }
+        };
+        let mut nested = self.nested_bsdfs(p)?;
+        if nested.len() != 1 {
+            return Err(self.ctx.err(
+                p.el,
+                format!("{kind} needs one nested bsdf, not {}", nested.len()),
+            ));
+        }
+        Ok(Perturbed {
+            nested: nested.remove(0),
+            by,
+            flip_invalid_normals: p.boolean("flip_invalid_normals")?.unwrap_or(true),
+            shadowing: p.boolean("use_shadowing_function")?.unwrap_or(true),
+        })
     }
 
     /// Mitsuba's `principled`: every parameter it reads, with its defaults. Its weights are
