@@ -313,6 +313,77 @@ fn bad_bump_and_normal_maps() {
 }
 
 #[test]
+fn bad_shape_groups_and_instances() {
+    let sphere = "<shape type=\"sphere\"/>";
+    expect_error(
+        &scene_text(&format!("<shape type=\"shapegroup\">{sphere}</shape>"), FILM),
+        8,
+        "a shapegroup needs an id",
+    );
+    expect_error(
+        &scene_text(
+            "<shape type=\"shapegroup\" id=\"g\"><shape type=\"sphere\"><emitter type=\"area\"/></shape></shape>",
+            FILM,
+        ),
+        8,
+        "an emitter cannot be part of a shapegroup",
+    );
+    expect_error(
+        &scene_text("<shape type=\"shapegroup\" id=\"g\"/>", FILM),
+        8,
+        "a shapegroup needs at least one shape",
+    );
+    expect_error(
+        &scene_text(
+            &format!(
+                "<shape type=\"shapegroup\" id=\"g\">{sphere}</shape>\n<shape type=\"instance\"><ref id=\"h\"/></shape>"
+            ),
+            FILM,
+        ),
+        9,
+        "no shapegroup with id \"h\"",
+    );
+    expect_error(
+        &scene_text(
+            &format!(
+                "<shape type=\"shapegroup\" id=\"g\">{sphere}</shape>\n<shape type=\"instance\"><ref id=\"g\"/><transform name=\"to_world\"><matrix value=\"1 0 0 0 1 0 0 0 0 0 0 0 0 0 0 1\"/></transform></shape>"
+            ),
+            FILM,
+        ),
+        9,
+        "cannot be inverted",
+    );
+    expect_error(
+        &scene_text("<shape type=\"instance\"/>", FILM),
+        8,
+        "an instance needs one <ref> to a shapegroup",
+    );
+    expect_error(
+        &scene_text(
+            &format!(
+                "<shape type=\"shapegroup\" id=\"g\"><shape type=\"shapegroup\" id=\"h\">{sphere}</shape></shape>"
+            ),
+            FILM,
+        ),
+        8,
+        "a shapegroup belongs at the top level",
+    );
+}
+
+/// Mitsuba refuses `stokes` outside its polarized variants; so do we, saying why.
+#[test]
+fn the_stokes_integrator_is_refused_as_in_mitsuba() {
+    expect_error(
+        &scene_text(
+            "<integrator type=\"stokes\"><integrator type=\"path\"/></integrator>",
+            FILM,
+        ),
+        8,
+        "This integrator should only be used in polarized mode!",
+    );
+}
+
+#[test]
 fn bad_media() {
     expect_error(
         &scene_text(

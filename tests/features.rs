@@ -7,7 +7,10 @@
 //! - `lights.xml`: spot, point and disk area lights, a thin-lens camera, a named glass IOR;
 //! - `meshes.xml`: PLY with vertex normals (and with `face_normals`), OBJ quads, `matrix`;
 //! - `mirrored.xml`: rectangles, a disk and a cube under mirroring transforms;
-//! - `bumpy.xml`: normal and bump maps on rectangles and spheres, one inside `twosided`.
+//! - `bumpy.xml`: normal and bump maps on rectangles and spheres, one inside `twosided`;
+//! - `instances.xml`: a shape group of three shapes, placed five times (one mirrored);
+//! - `polarizer.xml`: Mitsuba's `polarizer`, as its RGB variants render it;
+//! - `direct-projective.xml`: Mitsuba's `direct_projective` integrator, its primal image.
 //!
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
@@ -51,6 +54,37 @@ fn mirrored_rectangles_disks_and_cubes_face_as_in_mitsuba() {
 #[test]
 fn bump_and_normal_maps_match_mitsuba() {
     check("bumpy");
+}
+
+/// `instances.xml`: one group (an OBJ torus, a PLY sphere, a one-sided rectangle) placed by
+/// five instances: turned, unevenly scaled, mirrored, through a matrix, and one declared before
+/// its group.
+#[test]
+fn instanced_shape_groups_match_mitsuba() {
+    check("instances");
+}
+
+/// `polarizer.xml`: a coloured polarizer sheet between a light and a wall passes half its
+/// transmittance, to shadow rays and paths alike (Mitsuba's RGB variants carry no polarization).
+#[test]
+fn a_polarizer_passes_half_its_transmittance_as_in_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("polarizer");
+}
+
+/// `direct-projective.xml`: Mitsuba's differentiable direct illumination, rendered as its primal
+/// image (the path tracer at max_depth 2), with a warning that says so.
+#[test]
+fn direct_projective_renders_its_primal_image_as_in_mitsuba() {
+    let scene = photonfarm_tests::load(&photonfarm_tests::refs_dir().join("direct-projective.xml"), &[]);
+    assert!(
+        scene
+            .warnings
+            .iter()
+            .any(|w| w.contains("direct_projective") && w.contains("primal")),
+        "{:?}",
+        scene.warnings
+    );
+    photonfarm_tests::check_declared_against_mitsuba("direct-projective");
 }
 
 #[test]

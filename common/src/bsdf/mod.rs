@@ -116,6 +116,9 @@ pub enum Bsdf {
     /// No surface at all (Mitsuba's `null`): the boundary of a medium, which rays cross
     /// unchanged.
     Null,
+    /// Mitsuba's `polarizer` as its RGB variants render it: no surface, which passes half its
+    /// `transmittance` (unpolarized light through a linear polarizer keeps half its power).
+    Polarizer(Param<Rgb>),
     /// A material seen through a shading frame tilted by a normal or bump map.
     Perturbed(Box<Perturbed>),
 }
@@ -161,9 +164,9 @@ impl Bsdf {
             }
             Bsdf::Principled(b) => b.sample(uv, wi, u1, u2, mode),
             Bsdf::Perturbed(b) => b.sample(at, wi, u1, u2, mode),
-            Bsdf::Null => Some(BsdfSample {
+            Bsdf::Null | Bsdf::Polarizer(_) => Some(BsdfSample {
                 wo: -wi,
-                weight: Rgb::ONE,
+                weight: self.null_transmission(uv),
                 pdf: 1.0,
                 delta: true,
                 eta: 1.0,
@@ -216,7 +219,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),
-            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => Rgb::ZERO,
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null | Bsdf::Polarizer(_) => Rgb::ZERO,
             Bsdf::RoughDielectric(b) => b.eval(uv, wi, wo, mode),
             Bsdf::Plastic(b) => b.eval(uv, wi, wo),
             Bsdf::Mask(m) => m.0.eval_mode(at, wi, wo, mode) * m.1.at(uv).clamp(0.0, 1.0),
@@ -243,7 +246,7 @@ impl Bsdf {
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
             Bsdf::Conductor(b) => b.pdf(uv, wi, wo),
-            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => 0.0,
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null | Bsdf::Polarizer(_) => 0.0,
             Bsdf::RoughDielectric(b) => b.pdf(uv, wi, wo),
             Bsdf::Plastic(b) => b.pdf(wi, wo),
             Bsdf::Mask(m) => m.0.pdf(at, wi, wo) * m.1.at(uv).clamp(0.0, 1.0),
@@ -276,7 +279,8 @@ impl Bsdf {
             | Bsdf::Dielectric(_)
             | Bsdf::RoughDielectric(_)
             | Bsdf::ThinDielectric(_)
-            | Bsdf::Null => false,
+            | Bsdf::Null
+            | Bsdf::Polarizer(_) => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
                 pair.0.gathers_photons() || pair.1.gathers_photons()
             }
@@ -306,7 +310,7 @@ impl Bsdf {
             Bsdf::Diffuse(_) | Bsdf::Plastic(_) | Bsdf::Principled(_) => true,
             Bsdf::Conductor(c) => c.roughness.is_some(),
             Bsdf::RoughDielectric(_) => true,
-            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null => false,
+            Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Null | Bsdf::Polarizer(_) => false,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => pair.0.has_smooth() || pair.1.has_smooth(),
             Bsdf::Mask(m) => m.0.has_smooth(),
             Bsdf::Perturbed(b) => b.nested.has_smooth(),
@@ -317,7 +321,11 @@ impl Bsdf {
     /// light path bounce specularly off it, which the hybrid method's particle tracer needs.
     pub fn has_delta(&self) -> bool {
         match self {
-            Bsdf::Diffuse(_) | Bsdf::Principled(_) | Bsdf::RoughDielectric(_) | Bsdf::Null => false,
+            Bsdf::Diffuse(_)
+            | Bsdf::Principled(_)
+            | Bsdf::RoughDielectric(_)
+            | Bsdf::Null
+            | Bsdf::Polarizer(_) => false,
             Bsdf::Plastic(p) => p.roughness.is_none(),
             Bsdf::Conductor(c) => c.roughness.is_none(),
             Bsdf::Dielectric(_) | Bsdf::ThinDielectric(_) | Bsdf::Mask(_) => true,
@@ -326,9 +334,19 @@ impl Bsdf {
         }
     }
 
-    /// Whether this is no surface at all: paths and photons cross it without a bounce.
+    /// Whether this is no surface at all: paths and photons cross it without a bounce, scaled
+    /// by [`Bsdf::null_transmission`].
     pub fn is_null(&self) -> bool {
-        matches!(self, Bsdf::Null)
+        matches!(self, Bsdf::Null | Bsdf::Polarizer(_))
+    }
+
+    /// What a surface that [`Bsdf::is_null`] passes at `uv` (Mitsuba's
+    /// `eval_null_transmission`).
+    pub fn null_transmission(&self, uv: Vec2) -> Rgb {
+        match self {
+            Bsdf::Polarizer(t) => 0.5 * t.at(uv),
+            _ => Rgb::ONE,
+        }
     }
 }
 

@@ -3,7 +3,7 @@
 use glam::Vec3A;
 
 use super::bvh4::{self, BinaryTree, WideNode};
-use super::{Aabb, Hit, Primitive, Ray};
+use super::{Aabb, Hit, PrimHit, Primitive, Ray};
 
 const BINS: usize = 16;
 const MAX_LEAF: usize = 4;
@@ -161,8 +161,14 @@ impl Bvh {
             Accel::Own(nodes) => {
                 let mut best: Option<Hit> = None;
                 let mut t_max = t_max;
-                self.traverse::<true>(nodes, ray, &mut t_max, |prim, t, b1, b2| {
-                    best = Some(Hit { t, prim, b1, b2 });
+                self.traverse::<true>(nodes, ray, &mut t_max, |prim, h| {
+                    best = Some(Hit {
+                        t: h.t,
+                        prim,
+                        b1: h.b1,
+                        b2: h.b2,
+                        inner: h.inner,
+                    });
                     false
                 });
                 best
@@ -181,7 +187,7 @@ impl Bvh {
             Accel::Own(nodes) => {
                 let mut found = false;
                 let mut t_max = t_max;
-                self.traverse::<false>(nodes, ray, &mut t_max, |_, _, _, _| {
+                self.traverse::<false>(nodes, ray, &mut t_max, |_, _| {
                     found = true;
                     true
                 });
@@ -201,13 +207,13 @@ impl Bvh {
         nodes: &[WideNode],
         ray: &Ray,
         t_max: &mut f32,
-        mut on_hit: impl FnMut(u32, f32, f32, f32) -> bool,
+        mut on_hit: impl FnMut(u32, PrimHit) -> bool,
     ) {
         bvh4::traverse::<NEAREST_FIRST>(nodes, ray, t_max, |first, count, t_max| {
             for i in first as usize..(first + count) as usize {
-                if let Some((t, b1, b2)) = self.prims[i].intersect(ray, *t_max) {
-                    *t_max = t;
-                    if on_hit(i as u32, t, b1, b2) {
+                if let Some(h) = self.prims[i].intersect(ray, *t_max) {
+                    *t_max = h.t;
+                    if on_hit(i as u32, h) {
                         return true;
                     }
                 }
@@ -332,14 +338,15 @@ mod obvhs_backend {
         best: &'a mut Option<Hit>,
     ) -> impl FnMut(&ORay, usize) -> f32 + 'a {
         move |r, id| match prims[id].intersect(ray, r.tmax) {
-            Some((t, b1, b2)) => {
+            Some(h) => {
                 *best = Some(Hit {
-                    t,
+                    t: h.t,
                     prim: id as u32,
-                    b1,
-                    b2,
+                    b1: h.b1,
+                    b2: h.b2,
+                    inner: h.inner,
                 });
-                t
+                h.t
             }
             None => f32::INFINITY,
         }
@@ -347,7 +354,7 @@ mod obvhs_backend {
 
     /// obvhs's primitive callback for occlusion.
     fn any<'a>(prims: &'a [Primitive], ray: &'a Ray) -> impl FnMut(&ORay, usize) -> f32 + 'a {
-        move |r, id| prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.0)
+        move |r, id| prims[id].intersect(ray, r.tmax).map_or(f32::INFINITY, |h| h.t)
     }
 
     pub(super) fn intersect_cw(cw: &CwBvh, prims: &[Primitive], ray: &Ray, t_max: f32) -> Option<Hit> {
@@ -563,7 +570,7 @@ mod tests {
                 let ray = Ray::new(o, (target - o).normalize());
                 let brute = prims
                     .iter()
-                    .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| h.0))
+                    .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| h.t))
                     .min_by(|a, b| a.total_cmp(b));
                 let fast = bvh.intersect(&ray, f32::INFINITY).map(|h| h.t);
                 if bvh.backend() == Backend::Own {
@@ -591,7 +598,7 @@ mod tests {
                     let ray = Ray::new(o, square_to_uniform_sphere(s.next_2d()));
                     let brute = prims
                         .iter()
-                        .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| (h.0, p.shape())))
+                        .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| (h.t, p.shape())))
                         .min_by(|a, b| a.0.total_cmp(&b.0));
                     let fast = bvh
                         .intersect(&ray, f32::INFINITY)

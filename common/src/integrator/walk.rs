@@ -74,6 +74,7 @@ pub struct Hit<'s> {
 
 impl<'s> Hit<'s> {
     /// The surface at `sp`, seen from direction `wo`.
+    #[inline]
     pub fn new(scene: &'s Scene, sp: SurfacePoint, wo: Vec3A) -> Hit<'s> {
         let shape = &scene.shapes[sp.shape as usize];
         let bsdf = &scene.bsdfs[shape.bsdf as usize];
@@ -214,7 +215,9 @@ impl Walk {
                 return Event::Gone;
             };
             let shape = &scene.shapes[sp.shape as usize];
-            if scene.bsdfs[shape.bsdf as usize].is_null() {
+            let bsdf = &scene.bsdfs[shape.bsdf as usize];
+            if bsdf.is_null() {
+                self.beta *= bsdf.null_transmission(sp.uv);
                 match scene.cross_boundary(&sp, self.ray.d, self.medium, &mut self.crossings) {
                     Some((next, entered)) => (self.ray, self.medium) = (next, entered),
                     None => return Event::Gone,

@@ -261,9 +261,11 @@ impl Scene {
             let prim = &self.bvh.primitives()[hit.prim as usize];
             let surface = prim.surface(&Ray::new(o, d), &hit);
             let shape = &self.shapes[surface.shape as usize];
-            if !self.bsdfs[shape.bsdf as usize].is_null() {
+            let bsdf = &self.bsdfs[shape.bsdf as usize];
+            if !bsdf.is_null() {
                 return Rgb::ZERO;
             }
+            tr *= bsdf.null_transmission(surface.uv);
             if let Some(m) = medium {
                 tr *= self.media[m as usize].transmittance(hit.t * len);
             }

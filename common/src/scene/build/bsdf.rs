@@ -135,6 +135,12 @@ impl Builder<'_> {
                 }
             }
             "null" => Bsdf::Null,
+            "polarizer" => {
+                // Its angle and polarizing switch matter only to polarized light, which Mitsuba's
+                // RGB variants do not carry either.
+                let _ = (self.float_param(&p, "theta", 0.0)?, p.boolean("polarizing")?);
+                Bsdf::Polarizer(self.color_param(&p, "transmittance", Rgb::ONE)?)
+            }
             kind @ ("normalmap" | "bumpmap") => Bsdf::Perturbed(Box::new(self.perturbed(kind, &p)?)),
             "blendbsdf" => {
                 let w = self.float_param(&p, "weight", 0.5)?;
@@ -159,7 +165,7 @@ impl Builder<'_> {
                     format!(
                         "bsdf type \"{other}\" is not supported (diffuse, conductor, roughconductor, \
                          dielectric, roughdielectric, thindielectric, plastic, roughplastic, principled, \
-                         twosided, blendbsdf, mask, normalmap, bumpmap, null)"
+                         twosided, blendbsdf, mask, normalmap, bumpmap, null, polarizer)"
                     ),
                 ));
             }

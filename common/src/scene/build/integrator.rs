@@ -37,12 +37,24 @@ impl Builder<'_> {
             "ptracer" => Integrator::Ptracer,
             "direct" => Integrator::Direct,
             "sppm" => Integrator::Sppm,
+            // Mitsuba's differentiable direct illumination: its primal image is one emitter
+            // sample and one BSDF sample weighted by MIS (direct_projective.py), which our
+            // path tracer computes at max_depth 2.
+            "direct_projective" => Integrator::Path,
+            "stokes" => {
+                return Err(self.ctx.err(
+                    el,
+                    "the stokes integrator needs polarized rendering, which we do not do; Mitsuba \
+                     refuses it outside its polarized variants too (\"This integrator should only be \
+                     used in polarized mode!\")",
+                ));
+            }
             other => {
                 return Err(self.ctx.err(
                     el,
                     format!(
                         "integrator type \"{other}\" is not supported (path, volpath, volpathmis, direct, ptracer, \
-                         sppm, and moment or aov around one of them)"
+                         sppm, direct_projective, and moment or aov around one of them)"
                     ),
                 ));
             }
@@ -71,6 +83,16 @@ impl Builder<'_> {
             return Err(p.err_at(
                 "timeout",
                 "a render timeout is set on the command line (--time-limit), not in the scene".into(),
+            ));
+        }
+        let projective = kind == "direct_projective";
+        if projective {
+            self.projective_params(&p)?;
+            self.warnings.push(format!(
+                "{}:{}: <integrator type=\"direct_projective\">: rendering its primal image (direct \
+                 illumination, as path with max_depth 2); its gradients are Mitsuba's alone",
+                el.file.display(),
+                el.line
             ));
         }
         let params = match method {
@@ -123,9 +145,41 @@ impl Builder<'_> {
         p.finish()?;
         Ok(IntegratorDecl {
             kind: method,
-            max_depth: max_depth as i32,
-            rr_depth: rr_depth as u32,
+            // direct_projective sets its own depths, whatever the scene says.
+            max_depth: if projective { 2 } else { max_depth as i32 },
+            rr_depth: if projective { 2 } else { rr_depth as u32 },
             params,
         })
+    }
+
+    /// The parameters of Mitsuba's projective-sampling integrators, which steer only how its
+    /// gradients are sampled: read (so a typo is still an error) and checked as Mitsuba checks
+    /// them.
+    fn projective_params(&self, p: &Props) -> Res<()> {
+        for name in ["sppc", "sppp", "sppi", "guiding_rounds"] {
+            if let Some(v) = p.int(name)?
+                && v < 0
+            {
+                return Err(p.err_at(name, format!("{name} cannot be negative, not {v}")));
+            }
+        }
+        let _ = p.boolean("guiding_proj")?;
+        if let Some(g) = p.string("guiding")?
+            && !matches!(g, "none" | "grid" | "octree")
+        {
+            return Err(p.err_at(
+                "guiding",
+                format!("guiding must be one of none, grid or octree, not \"{g}\""),
+            ));
+        }
+        if let Some(s) = p.string("project_seed")?
+            && !matches!(s, "both" | "bsdf" | "emitter")
+        {
+            return Err(p.err_at(
+                "project_seed",
+                format!("project_seed must be one of both, bsdf or emitter, not \"{s}\""),
+            ));
+        }
+        Ok(())
     }
 }

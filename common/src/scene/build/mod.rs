@@ -100,6 +100,13 @@ struct Builder<'a> {
     area_ids: std::collections::HashSet<String>,
     /// Those a shape has taken: each belongs to one shape.
     area_taken: std::collections::HashSet<String>,
+    /// Shape groups, by id: their trees, which instances place.
+    groups: HashMap<String, Arc<Bvh>>,
+}
+
+/// Whether `el` is a `<shape type="shapegroup">`.
+fn is_shape_group(el: &Element) -> bool {
+    el.tag == "shape" && el.attr("type") == Some("shapegroup")
 }
 
 impl<'a> Builder<'a> {
@@ -123,6 +130,7 @@ impl<'a> Builder<'a> {
             sampler_ids: HashMap::new(),
             area_ids: Default::default(),
             area_taken: Default::default(),
+            groups: HashMap::new(),
         }
     }
 
@@ -184,9 +192,20 @@ impl<'a> Builder<'a> {
             }
         }
         self.area_ids = area_ids.keys().cloned().collect();
+        // Shape groups before the shapes, so that an instance may come first in the file.
+        for el in root.children.iter().filter(|e| is_shape_group(e)) {
+            let Some(id) = el.attr("id") else {
+                return Err(ctx.err(el, "a shapegroup needs an id for its instances to refer to"));
+            };
+            let group = self.shape_group(el, &area_ids)?;
+            if self.groups.insert(id.to_string(), group).is_some() {
+                return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
+            }
+        }
         for el in &root.children {
             match el.tag.as_str() {
                 "bsdf" | "medium" | "texture" | "sampler" => {}
+                "shape" if is_shape_group(el) => {}
                 "shape" => self.shape(el, &area_ids)?,
                 "emitter" if el.attr("type") == Some("area") && el.attr("id").is_some() => {}
                 "emitter" => self.emitter(el)?,

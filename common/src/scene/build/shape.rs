@@ -1,12 +1,13 @@
 //! `<shape>`: spheres, rectangles, disks, cubes and meshes, with their area emitters.
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use glam::{Mat4, Vec3A};
 
 use crate::bsdf::{Bsdf, Diffuse};
 use crate::color::Rgb;
-use crate::geometry::{Primitive, Sphere, Triangle};
+use crate::geometry::{Bvh, Instance, Primitive, Sphere, Triangle};
 use crate::scene::ShapeInfo;
 use crate::scene::mesh::{self, Mesh};
 use crate::scene::props::{Props, Res};
@@ -21,6 +22,9 @@ impl Builder<'_> {
         let index = self.shapes.len() as u32;
         let kind = p.kind()?;
         let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        if kind == "instance" {
+            return self.instance(&p, &to_world);
+        }
         let flip = p.boolean("flip_normals")?.unwrap_or(false);
         let is_file = matches!(kind, "obj" | "ply" | "serialized");
         let mut face_normals = false;
@@ -79,11 +83,18 @@ impl Builder<'_> {
                 }
                 Some(m)
             }
+            "shapegroup" => {
+                return Err(self.ctx.err(
+                    el,
+                    "a shapegroup belongs at the top level of the scene (Mitsuba nests no groups)",
+                ));
+            }
             other => {
                 return Err(self.ctx.err(
                     el,
                     format!(
-                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply, serialized)"
+                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply, \
+                         serialized, shapegroup, instance)"
                     ),
                 ));
             }
@@ -162,6 +173,64 @@ impl Builder<'_> {
             interior,
             exterior,
         });
+        Ok(())
+    }
+
+    /// A `<shape type="shapegroup">`: its shapes, in a tree of their own for instances to
+    /// place. They keep their materials; emitters cannot be instanced (nor can they in Mitsuba).
+    pub(super) fn shape_group(
+        &mut self,
+        el: &Element,
+        area_ids: &HashMap<String, &Element>,
+    ) -> Res<Arc<Bvh>> {
+        let p = Props::new(self.ctx, el)?;
+        let _ = p.kind()?;
+        let outer = std::mem::take(&mut self.prims);
+        let lights = self.area_emitters.len();
+        let mut built = Ok(());
+        for child in p.objects("shape") {
+            if matches!(child.attr("type"), Some("instance")) {
+                built = Err(self.ctx.err(child, "a shapegroup cannot hold an instance"));
+            } else {
+                built = self.shape(child, area_ids);
+            }
+            if built.is_ok() && self.area_emitters.len() != lights {
+                built = Err(self.ctx.err(
+                    child,
+                    "an emitter cannot be part of a shapegroup (Mitsuba does not instance emitters)",
+                ));
+            }
+            if built.is_err() {
+                break;
+            }
+        }
+        let prims = std::mem::replace(&mut self.prims, outer);
+        built?;
+        p.finish()?;
+        if prims.is_empty() {
+            return Err(self.ctx.err(el, "a shapegroup needs at least one shape"));
+        }
+        Ok(Arc::new(Bvh::build(prims)))
+    }
+
+    /// A `<shape type="instance">`: a `<ref>` to a shape group, placed by `to_world`.
+    fn instance(&mut self, p: &Props, to_world: &Mat4) -> Res<()> {
+        let refs = p.objects("ref");
+        let [r] = refs.as_slice() else {
+            return Err(self.ctx.err(p.el, "an instance needs one <ref> to a shapegroup"));
+        };
+        let id = r
+            .attr("id")
+            .ok_or_else(|| self.ctx.err(r, "a <ref> needs an id"))?;
+        let group = self
+            .groups
+            .get(id)
+            .ok_or_else(|| self.ctx.err(r, format!("no shapegroup with id \"{id}\"")))?
+            .clone();
+        p.finish()?;
+        let instance = Instance::new(group, glam::Affine3A::from_mat4(*to_world))
+            .ok_or_else(|| self.ctx.err(p.el, "an instance's to_world cannot be inverted"))?;
+        self.prims.push(Primitive::Instance(Box::new(instance)));
         Ok(())
     }
 
