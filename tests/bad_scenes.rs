@@ -370,6 +370,19 @@ fn bad_shape_groups_and_instances() {
     );
 }
 
+#[test]
+fn an_orthographic_sensor_takes_no_field_of_view() {
+    let text = format!(
+        r#"<scene version="3.0.0">
+    <sensor type="orthographic">
+        <float name="fov" value="45"/>
+        <film type="hdrfilm">{FILM}</film>
+    </sensor>
+</scene>"#
+    );
+    expect_error(&text, 2, "an orthographic sensor takes no fov or focal_length");
+}
+
 /// Mitsuba refuses `stokes` outside its polarized variants; so do we, saying why.
 #[test]
 fn the_stokes_integrator_is_refused_as_in_mitsuba() {

@@ -10,7 +10,8 @@
 //! - `bumpy.xml`: normal and bump maps on rectangles and spheres, one inside `twosided`;
 //! - `instances.xml`: a shape group of three shapes, placed five times (one mirrored);
 //! - `polarizer.xml`: Mitsuba's `polarizer`, as its RGB variants render it;
-//! - `direct-projective.xml`: Mitsuba's `direct_projective` integrator, its primal image.
+//! - `direct-projective.xml`: Mitsuba's `direct_projective` integrator, its primal image;
+//! - `orthographic.xml`: `meshes.xml` through Mitsuba's orthographic sensor, on a 3:2 film.
 //!
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
@@ -85,6 +86,13 @@ fn direct_projective_renders_its_primal_image_as_in_mitsuba() {
         scene.warnings
     );
     photonfarm_tests::check_declared_against_mitsuba("direct-projective");
+}
+
+/// `orthographic.xml`: parallel rays from the near plane, the extent set by to_world's scale, on
+/// a film of aspect 3:2, looking into the box at an angle.
+#[test]
+fn orthographic_sensor_matches_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("orthographic");
 }
 
 #[test]

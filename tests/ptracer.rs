@@ -44,6 +44,16 @@ fn thin_lens_and_three_lights_match_mitsuba_ptracer() {
     check_against_mitsuba(&scene, "lights-ptracer");
 }
 
+/// Connections to an orthographic camera (a delta direction: the camera's share is 1 / A, A the
+/// film's area in world space, with no 1/r²), against the path-traced Mitsuba reference
+/// `refs/orthographic.exr`: Mitsuba's own `ptracer` refuses an orthographic sensor
+/// ("Endpoint::sample_direction(): not implemented!"), and the light is the same.
+#[test]
+fn orthographic_camera_connections_match_mitsuba_path() {
+    let scene = load(&refs_dir().join("orthographic.xml"), &[]);
+    check_against_mitsuba(&scene, "orthographic");
+}
+
 /// Passes [0, 3) and [3, 8) add up to exactly [0, 8), with one thread or two: every
 /// contribution is rounded on its own, so where and in which order light paths land does not
 /// matter.

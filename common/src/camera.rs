@@ -1,11 +1,11 @@
-//! Perspective and thin-lens cameras, in Mitsuba's conventions.
+//! Perspective, thin-lens and orthographic cameras, in Mitsuba's conventions.
 
 use glam::{Mat4, Vec2, Vec3A};
 
 use crate::geometry::Ray;
 use crate::sampling::square_to_uniform_disk_concentric;
 
-/// A pinhole (aperture 0) or thin-lens camera.
+/// A pinhole (aperture 0), thin-lens or orthographic camera.
 ///
 /// Camera space is Mitsuba's: +z forward, +y up, +x to the left of the image, so that a
 /// `lookat` transform reproduces Mitsuba's framing exactly.
@@ -13,10 +13,14 @@ use crate::sampling::square_to_uniform_disk_concentric;
 pub struct Camera {
     /// Camera to world.
     pub to_world: Mat4,
-    /// tan(fov/2) along the image's x axis.
+    /// tan(fov/2) along the image's x axis (an orthographic camera's half width in camera
+    /// space: 1, as Mitsuba's, whose `to_world` scales it).
     pub tan_half_x: f32,
-    /// tan(fov/2) along the image's y axis.
+    /// tan(fov/2) along the image's y axis (orthographic: the half height, 1 / aspect).
     pub tan_half_y: f32,
+    /// Parallel rays along +z from the near plane (Mitsuba's `orthographic`) instead of rays
+    /// through a lens.
+    pub orthographic: bool,
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
@@ -40,6 +44,11 @@ impl Camera {
             (1.0 - 2.0 * sy) * self.tan_half_y,
             1.0,
         );
+        if self.orthographic {
+            let o = Vec3A::new(d.x, d.y, self.near_clip);
+            let dir = self.to_world.transform_vector3a(Vec3A::Z).normalize();
+            return Ray::new(self.to_world.transform_point3a(o), dir);
+        }
         let (o_local, d_local) = if self.aperture_radius > 0.0 {
             let lens = square_to_uniform_disk_concentric(u_lens) * self.aperture_radius;
             let focus = d * self.focus_distance;
@@ -66,6 +75,9 @@ impl Camera {
     /// or off the film.
     pub fn connect(&self, p: Vec3A, u_lens: Vec2) -> Option<CameraConnection> {
         let local = self.to_world.inverse().transform_point3a(p);
+        if self.orthographic {
+            return self.connect_orthographic(local);
+        }
         let lens = if self.aperture_radius > 0.0 {
             let l = square_to_uniform_disk_concentric(u_lens) * self.aperture_radius;
             Vec3A::new(l.x, l.y, 0.0)
@@ -95,6 +107,31 @@ impl Camera {
             film: Vec2::new(sx * self.width as f32, sy * self.height as f32),
             lens: self.to_world.transform_point3a(lens),
             weight: 1.0 / (area * cos * cos * cos * r * r),
+        })
+    }
+}
+
+impl Camera {
+    /// [`Camera::connect`] for parallel rays: the film point straight behind `local` (in camera
+    /// space), on the near plane. A delta direction has no 1/r² or cosine at the camera: the
+    /// camera's share is 1 / A, A the film's area in world space (`to_world` scales it).
+    fn connect_orthographic(&self, local: Vec3A) -> Option<CameraConnection> {
+        if local.z.is_nan() || local.z <= self.near_clip {
+            return None;
+        }
+        let sx = (1.0 - local.x / self.tan_half_x) / 2.0;
+        let sy = (1.0 - local.y / self.tan_half_y) / 2.0;
+        if !((0.0..1.0).contains(&sx) && (0.0..1.0).contains(&sy)) {
+            return None;
+        }
+        let width = self.to_world.transform_vector3a(Vec3A::X).length() * 2.0 * self.tan_half_x;
+        let height = self.to_world.transform_vector3a(Vec3A::Y).length() * 2.0 * self.tan_half_y;
+        Some(CameraConnection {
+            film: Vec2::new(sx * self.width as f32, sy * self.height as f32),
+            lens: self
+                .to_world
+                .transform_point3a(Vec3A::new(local.x, local.y, self.near_clip)),
+            weight: 1.0 / (width * height),
         })
     }
 }

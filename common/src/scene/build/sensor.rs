@@ -24,7 +24,7 @@ impl Builder<'_> {
         }
         self.far_clip = far_clip;
         let (aperture_radius, focus_distance) = match kind {
-            "perspective" => {
+            "perspective" | "orthographic" => {
                 // Mitsuba's RGB variants accept and ignore it on a pinhole.
                 let _ = p.float("focus_distance")?;
                 (0.0, 1.0)
@@ -42,7 +42,7 @@ impl Builder<'_> {
             other => {
                 return Err(self.ctx.err(
                     el,
-                    format!("sensor type \"{other}\" is not supported (perspective, thinlens)"),
+                    format!("sensor type \"{other}\" is not supported (perspective, thinlens, orthographic)"),
                 ));
             }
         };
@@ -51,7 +51,17 @@ impl Builder<'_> {
                 return Err(p.err_at(name, format!("a nonzero {name} is not supported")));
             }
         }
+        let orthographic = kind == "orthographic";
         let (fov, fov_axis) = match (p.float("fov")?, p.string("focal_length")?) {
+            // Mitsuba's orthographic camera has no field of view: its to_world's scale sets
+            // the extent it sees.
+            (None, None) if orthographic => (90.0, "x"),
+            _ if orthographic => {
+                return Err(self.ctx.err(
+                    el,
+                    "an orthographic sensor takes no fov or focal_length: scale its to_world",
+                ));
+            }
             (Some(_), Some(_)) => return Err(self.ctx.err(el, "give fov or focal_length, not both")),
             (Some(f), None) => (f, p.string("fov_axis")?.unwrap_or("x")),
             (None, focal) => {
@@ -114,10 +124,12 @@ impl Builder<'_> {
                 ));
             }
         };
+        let tan_half_x = if orthographic { 1.0 } else { tan_half_x };
         let camera = Camera {
             to_world,
             tan_half_x: tan_half_x as f32,
             tan_half_y: (tan_half_x / aspect) as f32,
+            orthographic,
             width,
             height,
             aperture_radius,
