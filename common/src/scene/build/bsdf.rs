@@ -138,7 +138,12 @@ impl Builder<'_> {
             "polarizer" => {
                 // Its angle and polarizing switch matter only to polarized light, which Mitsuba's
                 // RGB variants do not carry either.
-                let _ = (self.float_param(&p, "theta", 0.0)?, p.boolean("polarizing")?);
+                // Mitsuba reads theta as a texture, so scenes give it as a number, a spectrum or
+                // a texture.
+                if self.texture_param(&p, "theta")?.is_none() {
+                    let _ = p.rgb("theta")?;
+                }
+                let _ = p.boolean("polarizing")?;
                 Bsdf::Polarizer(self.color_param(&p, "transmittance", Rgb::ONE)?)
             }
             kind @ ("normalmap" | "bumpmap") => Bsdf::Perturbed(Box::new(self.perturbed(kind, &p)?)),
