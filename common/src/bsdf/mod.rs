@@ -124,7 +124,7 @@ pub enum Bsdf {
 }
 
 impl Bsdf {
-    /// Samples `wo` given `wi` at texture coordinates `uv`. `u1` chooses a lobe, `u2` the
+    /// Samples `wo` given `wi` at the surface `at`. `u1` chooses a lobe, `u2` the
     /// direction within it.
     pub fn sample(
         &self,
@@ -204,7 +204,7 @@ impl Bsdf {
         }
     }
 
-    /// f(wi, wo) · |cos θo| of the non-delta lobes at `uv`, for radiance (camera paths, light
+    /// f(wi, wo) · |cos θo| of the non-delta lobes at `at`, for radiance (camera paths, light
     /// sampling and photon gathering): where refraction treats the two transport modes
     /// differently (the principled's transmission), [`Bsdf::sample`] applies the mode it is
     /// given.
@@ -240,7 +240,7 @@ impl Bsdf {
         }
     }
 
-    /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes at `uv`.
+    /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes at `at`.
     pub fn pdf(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A) -> f32 {
         let uv = at.uv;
         match self {
