@@ -185,28 +185,24 @@ impl Builder<'_> {
     ) -> Res<Arc<Bvh>> {
         let p = Props::new(self.ctx, el)?;
         let _ = p.kind()?;
+        // The group's shapes go to a list of their own. An error ends the whole load, so the
+        // scene's list needs restoring only on success.
         let outer = std::mem::take(&mut self.prims);
         let lights = self.area_emitters.len();
-        let mut built = Ok(());
         for child in p.objects("shape") {
-            if matches!(child.attr("type"), Some("instance")) {
-                built = Err(self.ctx.err(child, "a shapegroup cannot hold an instance"));
-            } else {
-                built = self.shape(child, area_ids);
+            if child.attr("type") == Some("instance") {
+                return Err(self.ctx.err(child, "a shapegroup cannot hold an instance"));
             }
-            if built.is_ok() && self.area_emitters.len() != lights {
-                built = Err(self.ctx.err(
+            self.shape(child, area_ids)?;
+            if self.area_emitters.len() != lights {
+                return Err(self.ctx.err(
                     child,
                     "an emitter cannot be part of a shapegroup (Mitsuba does not instance emitters)",
                 ));
             }
-            if built.is_err() {
-                break;
-            }
         }
-        let prims = std::mem::replace(&mut self.prims, outer);
-        built?;
         p.finish()?;
+        let prims = std::mem::replace(&mut self.prims, outer);
         if prims.is_empty() {
             return Err(self.ctx.err(el, "a shapegroup needs at least one shape"));
         }
