@@ -85,6 +85,14 @@ impl Perturbed {
         }
     }
 
+    /// The tilted frame and `wo` in it, if `wo` lies on the same side of both frames (the check
+    /// Mitsuba's eval and pdf both make).
+    fn tilted(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A) -> Option<(Frame, Vec3A)> {
+        let f = self.frame(at, wi);
+        let pwo = f.to_local(wo);
+        if wo.z * pwo.z <= 0.0 { None } else { Some((f, pwo)) }
+    }
+
     /// The surface as the nested material sees it: the tilted frame, in world space.
     fn nested_at(at: &SurfaceAt, f: &Frame) -> SurfaceAt {
         SurfaceAt {
@@ -111,11 +119,9 @@ impl Perturbed {
     /// f · |cos θo| with the cosine of the tilted frame, zero unless `wo` lies on the same side
     /// of both frames.
     pub fn eval(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
-        let f = self.frame(at, wi);
-        let pwo = f.to_local(wo);
-        if wo.z * pwo.z <= 0.0 {
+        let Some((f, pwo)) = self.tilted(at, wi, wo) else {
             return Rgb::ZERO;
-        }
+        };
         let value = self
             .nested
             .eval_mode(&Self::nested_at(at, &f), f.to_local(wi), pwo, mode);
@@ -127,11 +133,9 @@ impl Perturbed {
 
     /// The nested material's density (a change of frame keeps solid angle).
     pub fn pdf(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A) -> f32 {
-        let f = self.frame(at, wi);
-        let pwo = f.to_local(wo);
-        if wo.z * pwo.z <= 0.0 {
+        let Some((f, pwo)) = self.tilted(at, wi, wo) else {
             return 0.0;
-        }
+        };
         self.nested.pdf(&Self::nested_at(at, &f), f.to_local(wi), pwo)
     }
 
