@@ -9,6 +9,7 @@ pub mod bundle;
 pub mod camera;
 pub mod color;
 pub mod compression;
+pub mod engine;
 pub mod film;
 pub mod filter;
 pub mod geometry;

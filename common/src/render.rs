@@ -213,7 +213,7 @@ fn add_pixel_samples(
 
 /// The camera ray of pixel (x, y) in pass `pass`, its offset within the pixel, and the sampler
 /// that goes on along it.
-fn camera_sample(scene: &Scene, seed: u64, pass: u64, x: u32, y: u32) -> (Ray, Vec2, Sampler) {
+pub(crate) fn camera_sample(scene: &Scene, seed: u64, pass: u64, x: u32, y: u32) -> (Ray, Vec2, Sampler) {
     let pixel = y as u64 * scene.width() as u64 + x as u64;
     // Even and odd passes are two independent sequences (of `pass / 2`), so the noise
     // estimate's halves stay independent (`parity.rs`).
@@ -301,14 +301,23 @@ fn light_path_passes(
 
 /// Box filter: one sample per pixel, computed in parallel by rows.
 fn add_box_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32) -> (Rgb, Vec2) + Sync) {
+    add_box_rows(scene, film, |y| {
+        (0..scene.width()).map(|x| sample(x, y).0).collect()
+    });
+}
+
+/// Box filter: one sample per pixel, computed in parallel by rows, `row(y)` giving row y's
+/// values (the lane engine traces a row's paths together).
+pub(crate) fn add_box_rows(scene: &Scene, film: &mut FilmSum, row: impl Fn(u32) -> Vec<Rgb> + Sync) {
     let w = scene.width();
     let rows: Vec<(Vec<[i64; 3]>, u64)> = (0..scene.height())
         .into_par_iter()
         .map(|y| {
             let mut nonfinite = 0;
-            let row = (0..w)
-                .map(|x| {
-                    to_fixed(sample(x, y).0).unwrap_or_else(|| {
+            let row = row(y)
+                .into_iter()
+                .map(|v| {
+                    to_fixed(v).unwrap_or_else(|| {
                         nonfinite += 1;
                         [0; 3]
                     })
