@@ -4,17 +4,23 @@
 //! Cornell box at 256², one thread ("per core"): path samples per second of the scalar path
 //! tracer and of the prototype on each backend this machine has, medians of 7 runs of 4 passes
 //! taken in turn in one process (so that load from other processes falls on all alike), with
-//! ratios to the scalar tracer. docs/engine.md keeps the table.
+//! ratios to the scalar tracer. Then the traversal alone, on rays recorded as the path tracer
+//! makes them (camera, diffuse bounce, shadow): one ray at a time against eight-ray packets,
+//! M rays/s, medians of 7. docs/engine.md keeps the tables.
 
 use std::path::Path;
 use std::time::Instant;
 
 use photonfarm::engine::Backend;
 use photonfarm::engine::diffuse_path::{DiffuseScene, render_pass};
+use photonfarm::engine::lanes::{F8, LANES, M8, V8};
 use photonfarm::film::FilmSum;
+use photonfarm::geometry::{Ray, Rays8};
 use photonfarm::integrator::path::PathSettings;
 use photonfarm::render::{Method, RenderSettings, render_passes};
 use photonfarm::scene::Scene;
+
+mod shared;
 
 const RUNS: usize = 7;
 const PASSES: u64 = 4;
@@ -22,6 +28,104 @@ const PASSES: u64 = 4;
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
+}
+
+/// Traces `rays` in packets of eight (the last one part full): how many hit.
+struct Packets<'a> {
+    scene: &'a Scene,
+    rays: &'a [Ray],
+    t_max: f32,
+    shadow: bool,
+}
+
+impl pulp::WithSimd for Packets<'_> {
+    type Output = usize;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> usize {
+        let mut n = 0;
+        for chunk in self.rays.chunks(LANES) {
+            let lane = |i: usize, f: fn(&Ray) -> f32| chunk.get(i).map_or(0.0, f);
+            let rays = Rays8 {
+                o: V8 {
+                    x: F8::from_fn(|i| lane(i, |r| r.o.x)),
+                    y: F8::from_fn(|i| lane(i, |r| r.o.y)),
+                    z: F8::from_fn(|i| lane(i, |r| r.o.z)),
+                },
+                d: V8 {
+                    x: F8::from_fn(|i| lane(i, |r| r.d.x)),
+                    y: F8::from_fn(|i| lane(i, |r| r.d.y)),
+                    z: F8::from_fn(|i| lane(i, |r| r.d.z)),
+                },
+                t_max: F8::splat(self.t_max),
+                active: M8::from_fn(|i| i < chunk.len()),
+            };
+            let hit = if self.shadow {
+                self.scene.bvh.occluded8(&rays)
+            } else {
+                self.scene.bvh.intersect8(&rays).found
+            };
+            n += hit.to_bools().iter().filter(|&&b| b).count();
+        }
+        n
+    }
+}
+
+/// Closest-hit and occlusion rates, one ray at a time and in packets on each backend.
+fn traversal(scene: &Scene, backends: &[Backend]) {
+    let rec = shared::record(scene);
+    let sets = [
+        ("camera", &rec.camera, f32::INFINITY, false),
+        ("bounce", &rec.bounce, f32::INFINITY, false),
+        ("shadow", &rec.shadow, shared::SHADOW_T_MAX, true),
+    ];
+    println!("traversal, M rays/s, 1 thread");
+    print!("{:<24}", "");
+    for b in backends {
+        print!(" {:>14}", format!("packets, {b}"));
+    }
+    println!();
+    for (name, rays, t_max, shadow) in sets {
+        let mut single = Vec::new();
+        let mut packets = vec![Vec::new(); backends.len()];
+        let mut counts = Vec::new();
+        for _ in 0..RUNS {
+            let t = Instant::now();
+            let n = rays
+                .iter()
+                .filter(|r| {
+                    if shadow {
+                        scene.bvh.occluded(r, t_max)
+                    } else {
+                        scene.bvh.intersect(r, t_max).is_some()
+                    }
+                })
+                .count();
+            single.push(rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
+            counts.push(n);
+            for (k, &b) in backends.iter().enumerate() {
+                let t = Instant::now();
+                let m = b.run(Packets {
+                    scene,
+                    rays,
+                    t_max,
+                    shadow,
+                });
+                packets[k].push(rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6);
+                assert_eq!(m, n, "{name} rays: packets on {b} found other hits");
+            }
+        }
+        let one = median(single);
+        print!(
+            "{:<24}",
+            format!("{name} ({}k), one ray {one:.1}", rays.len() / 1000)
+        );
+        for p in packets {
+            let m = median(p);
+            print!(" {:>8.1} {:>4.2}×", m, m / one);
+        }
+        println!();
+    }
 }
 
 fn main() {
@@ -67,4 +171,5 @@ fn main() {
             m / scalar
         );
     }
+    pool.install(|| traversal(&scene, &backends));
 }

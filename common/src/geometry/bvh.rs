@@ -3,7 +3,9 @@
 use glam::Vec3A;
 
 use super::bvh4::{self, BinaryTree, WideNode};
+use super::packet::{self, Hits8, Rays8};
 use super::{Aabb, Hit, PrimHit, Primitive, Ray};
+use crate::engine::lanes::{LANES, M8};
 
 const BINS: usize = 16;
 const MAX_LEAF: usize = 4;
@@ -198,6 +200,49 @@ impl Bvh {
             #[cfg(feature = "obvhs")]
             Accel::Bin(b) => obvhs_backend::occluded_bin(b, &self.prims, ray, t_max),
         }
+    }
+
+    /// Closest hits of eight rays at once, each lane's the hit [`Bvh::intersect`] finds for
+    /// its ray (see `packet.rs`).
+    #[inline(always)]
+    pub fn intersect8(&self, rays: &Rays8) -> Hits8 {
+        match &self.accel {
+            Accel::Own(nodes) => packet::closest(nodes, &self.prims, rays),
+            _ => self.lane_by_lane(rays, |ray, t_max| self.intersect(ray, t_max)),
+        }
+    }
+
+    /// Lanes of eight rays that something blocks, as [`Bvh::occluded`] finds them.
+    #[inline(always)]
+    pub fn occluded8(&self, rays: &Rays8) -> M8 {
+        match &self.accel {
+            Accel::Own(nodes) => packet::occluded(nodes, &self.prims, rays),
+            _ => {
+                let hits = self.lane_by_lane(rays, |ray, t_max| {
+                    self.occluded(ray, t_max).then_some(Hit {
+                        t: 0.0,
+                        prim: 0,
+                        b1: 0.0,
+                        b2: 0.0,
+                        inner: 0,
+                    })
+                });
+                hits.found
+            }
+        }
+    }
+
+    /// A packet query answered one ray at a time (the empty tree, obvhs's trees).
+    fn lane_by_lane(&self, rays: &Rays8, query: impl Fn(&Ray, f32) -> Option<Hit>) -> Hits8 {
+        let mut out = Hits8::none();
+        for lane in 0..LANES {
+            if rays.active.get(lane)
+                && let Some(h) = query(&rays.ray(lane), rays.t_max.0[lane])
+            {
+                out.record(lane, &h);
+            }
+        }
+        out
     }
 
     /// Traversal, front to back if `NEAREST_FIRST`; `on_hit` returns true to stop.

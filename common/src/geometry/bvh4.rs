@@ -42,7 +42,7 @@ pub(super) struct WideNode {
     /// two cache lines: with 32 it took three.)
     count: [u16; 4],
     /// Lanes that hold a child, as a bit mask (empty lanes' boxes are never tested in).
-    used: u32,
+    pub(super) used: u32,
 }
 
 /// What the traversal does next: a wide node to test, or a leaf's primitives.
@@ -67,6 +67,21 @@ impl WideNode {
             count: [0; 4],
             used: 0,
         }
+    }
+
+    /// Child `lane`'s box as (min, max), for the packet traversal.
+    #[inline(always)]
+    pub(super) fn child_bounds(&self, lane: usize) -> [[f32; 3]; 2] {
+        [
+            [self.min_x[lane], self.min_y[lane], self.min_z[lane]],
+            [self.max_x[lane], self.max_y[lane], self.max_z[lane]],
+        ]
+    }
+
+    /// Child `lane`: (wide node, 0) or (first primitive, count).
+    #[inline(always)]
+    pub(super) fn child(&self, lane: usize) -> (u32, u16) {
+        (self.child[lane], self.count[lane])
     }
 
     fn set(&mut self, lane: usize, b: Aabb, child: u32, count: u16) {
