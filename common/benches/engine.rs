@@ -74,9 +74,14 @@ impl pulp::WithSimd for Packets<'_> {
 /// Closest-hit and occlusion rates, one ray at a time and in packets on each backend.
 fn traversal(scene: &Scene, backends: &[Backend]) {
     let rec = shared::record(scene);
+    let octant =
+        |r: &Ray| usize::from(r.d.x < 0.0) | usize::from(r.d.y < 0.0) << 1 | usize::from(r.d.z < 0.0) << 2;
+    let mut by_octant = rec.bounce.clone();
+    by_octant.sort_by_key(octant);
     let sets = [
         ("camera", &rec.camera, f32::INFINITY, false),
         ("bounce", &rec.bounce, f32::INFINITY, false),
+        ("bounce/octant", &by_octant, f32::INFINITY, false),
         ("shadow", &rec.shadow, shared::SHADOW_T_MAX, true),
     ];
     println!("traversal, M rays/s, 1 thread");

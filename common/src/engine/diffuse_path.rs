@@ -168,6 +168,8 @@ struct Paths {
     t: Vec<f32>,
     b: [Vec<f32>; 2],
     tri: Vec<u32>,
+    /// The intersection stage's order of the paths (kept to reuse its allocation).
+    order: Vec<u32>,
     /// Whether the path goes on after this bounce (false in padding lanes).
     alive: Vec<bool>,
     /// This bounce's shadow ray (origin, direction to the target) and what it carries if
@@ -199,6 +201,7 @@ impl Row<'_> {
             t: vec![0.0; len],
             b: [vec![0.0; len], vec![0.0; len]],
             tri: vec![0; len],
+            order: Vec::with_capacity(w),
             alive: vec![false; len],
             shadow_o: lanes3(len),
             shadow_d: lanes3(len),
@@ -228,23 +231,53 @@ impl Row<'_> {
     }
 }
 
-/// Closest hits of the live rays, eight at a time; rays that leave the scene end (the
-/// prototype's scenes have no environment).
+/// Closest hits of the live rays, eight at a time, packed by direction octant (so that a
+/// packet's rays visit the tree's children in one order; a ray's hit does not depend on its
+/// packet); rays that leave the scene end (the prototype's scenes have no environment).
 #[inline(always)]
 fn intersect(scene: &Scene, paths: &mut Paths) {
-    for start in (0..paths.n).step_by(LANES) {
-        let hits = scene.bvh.intersect8(&Rays8 {
-            o: load3(&paths.o, start),
-            d: load3(&paths.d, start),
-            t_max: F8::splat(f32::INFINITY),
-            active: M8::from_fn(|i| start + i < paths.n),
-        });
-        hits.t.store(&mut paths.t, start);
-        hits.b1.store(&mut paths.b[0], start);
-        hits.b2.store(&mut paths.b[1], start);
-        paths.tri[start..start + LANES].copy_from_slice(&hits.prim);
-        paths.alive[start..start + LANES].copy_from_slice(&hits.found.to_bools());
+    let octant = |i: usize| {
+        usize::from(paths.d[0][i] < 0.0)
+            | usize::from(paths.d[1][i] < 0.0) << 1
+            | usize::from(paths.d[2][i] < 0.0) << 2
+    };
+    let mut first = [0usize; 9];
+    for i in 0..paths.n {
+        first[octant(i) + 1] += 1;
     }
+    for k in 1..9 {
+        first[k] += first[k - 1];
+    }
+    let mut order = std::mem::take(&mut paths.order);
+    order.resize(paths.n, 0);
+    for i in 0..paths.n {
+        let k = octant(i);
+        order[first[k]] = i as u32;
+        first[k] += 1;
+    }
+    for chunk in order.chunks(LANES) {
+        let at = |v: &[f32], i: usize| chunk.get(i).map_or(0.0, |&j| v[j as usize]);
+        let gather = |v: &[Vec<f32>; 3]| V8 {
+            x: F8::from_fn(|i| at(&v[0], i)),
+            y: F8::from_fn(|i| at(&v[1], i)),
+            z: F8::from_fn(|i| at(&v[2], i)),
+        };
+        let hits = scene.bvh.intersect8(&Rays8 {
+            o: gather(&paths.o),
+            d: gather(&paths.d),
+            t_max: F8::splat(f32::INFINITY),
+            active: M8::from_fn(|i| i < chunk.len()),
+        });
+        for (lane, &j) in chunk.iter().enumerate() {
+            let j = j as usize;
+            paths.t[j] = hits.t.0[lane];
+            paths.b[0][j] = hits.b1.0[lane];
+            paths.b[1][j] = hits.b2.0[lane];
+            paths.tri[j] = hits.prim[lane];
+            paths.alive[j] = hits.found.get(lane);
+        }
+    }
+    paths.order = order;
 }
 
 /// Shadow rays of this bounce, eight at a time: what each carries is added to its pixel if
