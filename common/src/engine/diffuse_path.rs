@@ -635,11 +635,18 @@ mod tests {
     }
 
     #[test]
-    fn every_backend_gives_the_same_bytes() {
+    fn every_backend_and_thread_count_gives_the_same_bytes() {
         let scene = cbox(24);
         let first = lanes(&scene, Backend::Sse2, 0..3);
-        for b in Backend::available() {
-            assert!(lanes(&scene, b, 0..3) == first, "{b} differs from sse2");
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for b in Backend::available() {
+                let film = pool.install(|| lanes(&scene, b, 0..3));
+                assert!(film == first, "{b} on {threads} threads differs from sse2");
+            }
         }
     }
 
