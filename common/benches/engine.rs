@@ -1,8 +1,9 @@
 //! The lane engine's prototype against the scalar path tracer:
 //! `cargo bench -p photonfarm-common --bench engine`.
 //!
-//! Cornell box at 256², one thread ("per core"): path samples per second of the scalar path
-//! tracer and of the prototype on each backend this machine has, medians of 7 runs of 4 passes
+//! The Cornell box and a bumpy sphere of 131,072 triangles in it (face normals), at 256², one thread ("per
+//! core"): path samples per second of the scalar path tracer and of the prototype on each
+//! backend this machine has, medians of 7 runs of 4 passes
 //! taken in turn in one process (so that load from other processes falls on all alike), with
 //! ratios to the scalar tracer. Then the traversal alone, on rays recorded as the path tracer
 //! makes them (camera, diffuse bounce, shadow): one ray at a time against eight-ray packets,
@@ -17,7 +18,7 @@ use photonfarm::engine::lanes::{F8, LANES, M8, V8};
 use photonfarm::film::FilmSum;
 use photonfarm::geometry::{Ray, Rays8};
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes};
+use photonfarm::render::{Method, RenderSettings, render_passes_on};
 use photonfarm::scene::Scene;
 
 mod shared;
@@ -133,39 +134,34 @@ fn traversal(scene: &Scene, backends: &[Backend]) {
     }
 }
 
-fn main() {
-    let refs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs");
-    let res = [("res".to_string(), "256".to_string())];
-    let scene = Scene::load(&refs.join("cbox.xml"), &res).unwrap();
-    let ds = DiffuseScene::new(&scene).unwrap();
+/// The prototype against the scalar path tracer on `scene`, then the traversal table.
+fn race(name: &str, scene: &Scene, backends: &[Backend]) {
+    let path = PathSettings::from_scene(scene);
+    let ds = DiffuseScene::new(scene, &path).unwrap();
     let settings = RenderSettings {
         seed: 0,
-        method: Method::Path(PathSettings::from_scene(&scene)),
+        method: Method::Path(path),
     };
     let samples = (scene.width() * scene.height()) as f64 * PASSES as f64;
-    let backends = Backend::available();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     // [0] scalar, [1..] backends: M samples/s of each run.
     let mut rates = vec![Vec::new(); 1 + backends.len()];
-    pool.install(|| {
-        for run in 0..RUNS as u64 {
-            let passes = run * PASSES..(run + 1) * PASSES;
+    for run in 0..RUNS as u64 {
+        let passes = run * PASSES..(run + 1) * PASSES;
+        let t = Instant::now();
+        std::hint::black_box(render_passes_on(scene, &settings, passes.clone(), None));
+        rates[0].push(samples / t.elapsed().as_secs_f64() / 1e6);
+        for (k, &b) in backends.iter().enumerate() {
+            let mut film = FilmSum::new(scene.width(), scene.height());
             let t = Instant::now();
-            std::hint::black_box(render_passes(&scene, &settings, passes.clone()));
-            rates[0].push(samples / t.elapsed().as_secs_f64() / 1e6);
-            for (k, &b) in backends.iter().enumerate() {
-                let mut film = FilmSum::new(scene.width(), scene.height());
-                let t = Instant::now();
-                for pass in passes.clone() {
-                    render_pass(&scene, &ds, 0, pass, b, &mut film);
-                }
-                std::hint::black_box(&film);
-                rates[k + 1].push(samples / t.elapsed().as_secs_f64() / 1e6);
+            for pass in passes.clone() {
+                render_pass(scene, &ds, 0, pass, b, &mut film);
             }
+            std::hint::black_box(&film);
+            rates[k + 1].push(samples / t.elapsed().as_secs_f64() / 1e6);
         }
-    });
+    }
     let scalar = median(rates[0].clone());
-    println!("cbox 256², 1 thread, medians of {RUNS} runs of {PASSES} passes");
+    println!("{name}, 256², 1 thread, medians of {RUNS} runs of {PASSES} passes");
     println!("{:<24} {:>8.3} M samples/s", "scalar path tracer", scalar);
     for (k, b) in backends.iter().enumerate() {
         let m = median(rates[k + 1].clone());
@@ -176,5 +172,19 @@ fn main() {
             m / scalar
         );
     }
-    pool.install(|| traversal(&scene, &backends));
+    traversal(scene, backends);
+}
+
+fn main() {
+    let refs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs");
+    let res = [("res".to_string(), "256".to_string())];
+    let backends = Backend::available();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let cbox = Scene::load(&refs.join("cbox.xml"), &res).unwrap();
+    pool.install(|| race("cbox (36 triangles)", &cbox, &backends));
+    let dir = tempfile::tempdir().unwrap();
+    // Face normals: the prototype does not interpolate vertex normals.
+    let (bumpy, tris) = shared::bumpy_cbox(dir.path(), &res, true);
+    let name = format!("bumpy sphere in cbox ({}k triangles, face normals)", tris / 1000);
+    pool.install(|| race(&name, &bumpy, &backends));
 }

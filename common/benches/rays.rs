@@ -10,20 +10,18 @@
 //! evaluation): rays per second per type (medians of 5), build times and hit mismatches against
 //! ours.
 
-use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec2;
 use photonfarm::geometry::Frame;
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes};
+use photonfarm::render::{Method, RenderSettings, render_passes_on};
 use photonfarm::sampling::{Sampler, Stream, square_to_cosine_hemisphere};
 use photonfarm::scene::Scene;
 #[cfg(feature = "obvhs")]
 use shared::{SHADOW_T_MAX, record};
 
-#[cfg(feature = "obvhs")]
 mod shared;
 
 const RUNS: usize = 5;
@@ -31,54 +29,6 @@ const RUNS: usize = 5;
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
-}
-
-/// A lat-long sphere with a bumpy radius, as a binary little-endian PLY.
-fn write_bumpy_sphere(path: &Path, rings: u32, segments: u32) -> usize {
-    let mut verts = Vec::new();
-    for i in 0..=rings {
-        let theta = std::f32::consts::PI * i as f32 / rings as f32;
-        for j in 0..segments {
-            let phi = 2.0 * std::f32::consts::PI * j as f32 / segments as f32;
-            let r = 0.45 * (1.0 + 0.06 * (13.0 * theta).sin() * (17.0 * phi).sin());
-            verts.push([
-                r * theta.sin() * phi.cos(),
-                -0.5 + r * theta.cos(),
-                r * theta.sin() * phi.sin(),
-            ]);
-        }
-    }
-    let mut faces = Vec::new();
-    for i in 0..rings {
-        for j in 0..segments {
-            let a = i * segments + j;
-            let b = i * segments + (j + 1) % segments;
-            let (c, d) = (a + segments, b + segments);
-            faces.push([a, c, b]);
-            faces.push([b, c, d]);
-        }
-    }
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    write!(
-        f,
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
-         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        verts.len(),
-        faces.len()
-    )
-    .unwrap();
-    for v in &verts {
-        for c in v {
-            f.write_all(&c.to_le_bytes()).unwrap();
-        }
-    }
-    for t in &faces {
-        f.write_all(&[3u8]).unwrap();
-        for i in t {
-            f.write_all(&(*i as i32).to_le_bytes()).unwrap();
-        }
-    }
-    faces.len()
 }
 
 /// Camera rays, then for each hit one cosine-distributed bounce and one shadow ray to a light.
@@ -136,7 +86,7 @@ fn bench(name: &str, scene: &Scene) {
         let (_, n) = ray_mix(scene, run);
         mix.push(n as f64 / t.elapsed().as_secs_f64());
         let t = Instant::now();
-        pool.install(|| render_passes(scene, &settings, run..run + 1));
+        pool.install(|| render_passes_on(scene, &settings, run..run + 1, None));
         paths.push((scene.width() * scene.height()) as f64 / t.elapsed().as_secs_f64());
     }
     println!(
@@ -266,17 +216,8 @@ fn main() {
     ab("cbox", &cbox);
 
     let dir = tempfile::tempdir().unwrap();
-    let tris = write_bumpy_sphere(&dir.path().join("bumpy.ply"), 256, 256);
-    let text = std::fs::read_to_string(refs.join("cbox.xml")).unwrap();
-    let start = text.find("<shape type=\"cube\" id=\"small-box\">").unwrap();
-    let text = format!(
-        "{}<shape type=\"ply\"><string name=\"filename\" value=\"bumpy.ply\"/><ref id=\"white\"/></shape>\n</scene>\n",
-        &text[..start]
-    );
-    let path = dir.path().join("bumpy.xml");
-    std::fs::write(&path, text).unwrap();
     let t = Instant::now();
-    let mesh = Scene::load(&path, &res).unwrap();
+    let (mesh, tris) = shared::bumpy_cbox(dir.path(), &res, false);
     println!(
         "bumpy sphere: {tris} triangles, loaded and BVH built in {:.3} s",
         t.elapsed().as_secs_f64()

@@ -10,6 +10,8 @@ use rayon::prelude::*;
 use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
+use crate::engine::Backend;
+use crate::engine::diffuse_path::{self, DiffuseScene};
 use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
 use crate::integrator::direct_illumination::{self, DirectSettings};
@@ -71,13 +73,36 @@ pub struct RenderSettings {
     pub method: Method,
 }
 
-/// Renders passes `passes` in the current rayon pool. For SPPM the radii come from the
-/// settings' schedule; [`render_sppm_iterations`] takes them from the caller instead.
+/// Renders passes `passes` in the current rayon pool, on the process's backend
+/// ([`Backend::current`], `PHOTONFARM_SIMD`). For SPPM the radii come from the settings'
+/// schedule; [`render_sppm_iterations`] takes them from the caller instead.
 pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64>) -> FilmSum {
+    render_passes_on(scene, settings, passes, Some(Backend::current()))
+}
+
+/// [`render_passes`] on `lanes`: the path tracer runs in the lane engine on that backend where
+/// the engine models the scene (so far Lambertian triangles lit by area lights:
+/// `engine::diffuse_path`), with the same bytes on every backend; everything else runs on the
+/// scalar integrators, and so does everything with `None` (the benches' and tests' reference).
+pub fn render_passes_on(
+    scene: &Scene,
+    settings: &RenderSettings,
+    passes: Range<u64>,
+    lanes: Option<Backend>,
+) -> FilmSum {
     match &settings.method {
-        Method::Path(p) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
-            path::radiance(scene, p, Share::All, ray, sampler)
-        }),
+        Method::Path(p) => match (lanes, DiffuseScene::new(scene, p)) {
+            (None, _) | (_, Err(_)) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
+                path::radiance(scene, p, Share::All, ray, sampler)
+            }),
+            (Some(backend), Ok(ds)) => {
+                let mut film = FilmSum::new(scene.width(), scene.height());
+                for pass in passes {
+                    diffuse_path::render_pass(scene, &ds, settings.seed, pass, backend, &mut film);
+                }
+                film
+            }
+        },
         Method::Direct(d) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
             direct_illumination::radiance(scene, d, ray, sampler)
         }),

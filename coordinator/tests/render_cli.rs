@@ -68,6 +68,52 @@ fn thread_count_does_not_change_the_bytes() {
     assert!(std::fs::read(&other).unwrap() != images[0]);
 }
 
+/// The lane engine (cbox: diffuse triangles) pinned to each instruction set this machine has,
+/// on 1 and 2 threads: the same EXR bytes; a backend the machine cannot run, or no backend,
+/// is refused before rendering.
+#[test]
+fn every_simd_backend_gives_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = refs().join("cbox.xml");
+    let render = |simd: &str, threads: &str| {
+        let out = dir.path().join(format!("{simd}-{threads}.exr"));
+        let o = coordinator()
+            .env("PHOTONFARM_SIMD", simd)
+            .args(["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap()])
+            .args(["--spp", "3", "--seed", "5", "--threads", threads, "-D", "res=40"])
+            .output()
+            .unwrap();
+        (o, out)
+    };
+    // The scene must be one the lane engine models, or this would test the scalar tracer.
+    let loaded = photonfarm::scene::Scene::load(&scene, &[]).unwrap();
+    let path = photonfarm::integrator::path::PathSettings::from_scene(&loaded);
+    assert!(photonfarm::engine::diffuse_path::DiffuseScene::new(&loaded, &path).is_ok());
+    let available = photonfarm::engine::Backend::available();
+    let mut first: Option<Vec<u8>> = None;
+    for b in &available {
+        for threads in ["1", "2"] {
+            let (o, out) = render(b.name(), threads);
+            assert!(o.status.success(), "{b}: {}", String::from_utf8_lossy(&o.stderr));
+            let bytes = std::fs::read(&out).unwrap();
+            match &first {
+                None => first = Some(bytes),
+                Some(f) => assert!(*f == bytes, "{b} on {threads} threads gives other bytes"),
+            }
+        }
+    }
+    for bad in ["neon", "avx1024"] {
+        let (o, out) = render(bad, "1");
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(&format!("PHOTONFARM_SIMD={bad}")) && err.contains("this machine has: sse2"),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
+}
+
 #[test]
 fn time_limit_renders_whole_passes() {
     let dir = tempfile::tempdir().unwrap();

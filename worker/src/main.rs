@@ -63,6 +63,14 @@ fn main() -> ExitCode {
         eprintln!("error: --threads must be at least 1");
         return ExitCode::FAILURE;
     }
+    // Every backend gives the same bytes; PHOTONFARM_SIMD pins one (docs/engine.md).
+    match photonfarm::engine::Backend::from_env() {
+        Ok(b) => tracing::info!(simd = b.name(), "lane engine backend"),
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
     let rt = match tokio::runtime::Runtime::new() {
         Ok(rt) => rt,
         Err(e) => {

@@ -4,7 +4,8 @@
 //! This is step 1, the prototype: [`diffuse_path`] path-traces scenes of Lambertian triangles
 //! lit by area lights (the Cornell box) on the lane types ([`lanes`]) and our own
 //! transcendentals ([`math`]), so that the design's speed can be measured before every
-//! integrator is converted (`cargo bench -p photonfarm-common --bench engine`).
+//! integrator is converted (`cargo bench -p photonfarm-common --bench engine`). The path
+//! tracer hands it the scenes it models (`render::render_passes_on`).
 
 pub mod diffuse_path;
 pub mod lanes;
@@ -12,7 +13,8 @@ pub mod math;
 
 use std::fmt;
 
-/// An instruction set the lane kernels can be compiled for, picked at run time.
+/// An instruction set the lane kernels are compiled for, picked at run time
+/// (`PHOTONFARM_SIMD`). Every one gives the same bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backend {
     /// x86-64's baseline: two SSE2 registers per lane group.
@@ -62,17 +64,31 @@ impl Backend {
         Backend::ALL.into_iter().filter(|b| b.is_available()).collect()
     }
 
-    /// The widest backend this machine runs.
+    /// The fastest backend this machine runs: AVX2 where it has it. AVX-512 at eight lanes
+    /// measured slower than AVX2 on the whole path (docs/engine.md: 1.43–1.50× the scalar
+    /// tracer against 1.55–1.58×), so it runs only when pinned.
     pub fn best() -> Backend {
-        *Backend::available().last().expect("SSE2 is x86-64's baseline")
+        if Backend::Avx2.is_available() {
+            Backend::Avx2
+        } else {
+            Backend::Sse2
+        }
     }
 
     /// The backend `PHOTONFARM_SIMD` pins, or the best one when it is unset or empty.
+    /// Binaries call it at start, so that a bad value is an error before any work.
     pub fn from_env() -> Result<Backend, BackendError> {
         match std::env::var("PHOTONFARM_SIMD") {
             Ok(v) if !v.is_empty() => v.parse(),
             _ => Ok(Backend::best()),
         }
+    }
+
+    /// The process's backend: [`Backend::from_env`]'s, read once (the best one if the variable
+    /// is invalid: binaries have refused that already).
+    pub fn current() -> Backend {
+        static CURRENT: std::sync::OnceLock<Backend> = std::sync::OnceLock::new();
+        *CURRENT.get_or_init(|| Backend::from_env().unwrap_or_else(|_| Backend::best()))
     }
 
     /// Runs `op` compiled for this backend's instruction set. Panics if the machine lacks it
