@@ -36,15 +36,16 @@ const JOB: &[&str] = &[
 ];
 
 fn local_render(dir: &Path, job: &[&str]) -> Vec<u8> {
+    local_render_of(dir, &scene(), job, &[])
+}
+
+/// `coordinator render` of `scene` with `job`'s flags and extra environment.
+fn local_render_of(dir: &Path, scene: &Path, job: &[&str], env: &[(&str, &str)]) -> Vec<u8> {
     let out = dir.join("local.exr");
     let o = Command::new(coordinator_bin())
-        .args([
-            "render",
-            scene().to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
+        .args(["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap()])
         .args(job)
+        .envs(env.iter().copied())
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -52,8 +53,12 @@ fn local_render(dir: &Path, job: &[&str]) -> Vec<u8> {
 }
 
 fn submit(url: &str, job: &[&str]) -> u64 {
+    submit_of(url, &scene(), job)
+}
+
+fn submit_of(url: &str, scene: &Path, job: &[&str]) -> u64 {
     let o = Command::new(coordinator_bin())
-        .args(["submit", "--to", url, scene().to_str().unwrap()])
+        .args(["submit", "--to", url, scene.to_str().unwrap()])
         .args(job)
         .output()
         .unwrap();
@@ -62,13 +67,21 @@ fn submit(url: &str, job: &[&str]) -> u64 {
 }
 
 fn status(url: &str, id: u64) -> Option<Value> {
+    let v = get(url, &format!("/api/jobs/{id}"));
+    (!v.is_null()).then_some(v)
+}
+
+/// `GET url + path` as JSON (null if it fails).
+fn get(url: &str, path: &str) -> Value {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
     rt.block_on(async {
-        let r = reqwest::get(format!("{url}/api/jobs/{id}")).await.ok()?;
-        r.json().await.ok()
+        let Ok(r) = reqwest::get(format!("{url}{path}")).await else {
+            return Value::Null;
+        };
+        r.json().await.unwrap_or(Value::Null)
     })
 }
 
@@ -127,6 +140,47 @@ fn two_workers_give_the_bytes_of_a_local_render() {
     assert_eq!(s["iterations_done"], 40);
     assert_eq!(s["checkpoint_iterations"], 40);
     assert!(same, "farm and local bytes differ");
+}
+
+/// A path-tracing job on the Cornell box, which runs on the lane engine, rendered by two
+/// workers pinned to different instruction sets (`PHOTONFARM_SIMD`), gives the bytes of a
+/// local render on a third (or the first, on a machine with two).
+#[test]
+fn workers_on_different_simd_backends_give_the_local_bytes() {
+    let available = photonfarm::engine::Backend::available();
+    let pick = |i: usize| available[i.min(available.len() - 1)].name();
+    let dir = tempfile::tempdir().unwrap();
+    let cbox = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox.xml");
+    let job = ["--spp", "128", "--seed", "9", "-D", "res=64"];
+    let (_coordinator, url) = serve(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        &["--batch-seconds", "0.05"],
+    );
+    let _w1 = support::worker_with_env(&url, "w1", dir.path(), &[("PHOTONFARM_SIMD", pick(0))]);
+    let _w2 = support::worker_with_env(&url, "w2", dir.path(), &[("PHOTONFARM_SIMD", pick(1))]);
+    let batches = |name: &str| {
+        let w = get(&url, "/api/workers");
+        w["workers"]
+            .as_array()
+            .and_then(|ws| ws.iter().find(|x| x["name"] == name))
+            .map(|x| x["batches"].clone())
+    };
+    wait_until("both workers to ask for work", Duration::from_secs(30), || {
+        batches("w1").is_some() && batches("w2").is_some()
+    });
+    let id = submit_of(&url, &cbox, &job);
+    let s = wait_done(&url, id);
+    assert_eq!(s["iterations_done"], 128, "{s}");
+    for name in ["w1", "w2"] {
+        let n = batches(name).and_then(|b| b.as_u64()).unwrap_or(0);
+        assert!(
+            n >= 1,
+            "{name} rendered no batch: the test would compare one backend only"
+        );
+    }
+    let local = local_render_of(dir.path(), &cbox, &job, &[("PHOTONFARM_SIMD", pick(2))]);
+    assert!(image(&url, id) == local, "farm and local bytes differ");
 }
 
 /// Jobs of the particle tracer and of the hybrid method (cbox-spheres' glass gives it caustic
