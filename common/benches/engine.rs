@@ -1,7 +1,7 @@
 //! The lane engine's prototype against the scalar path tracer:
 //! `cargo bench -p photonfarm-common --bench engine`.
 //!
-//! The Cornell box and a bumpy sphere of 131,072 triangles in it (face normals), at 256², one thread ("per
+//! The Cornell box and a bumpy sphere of 131,072 triangles in it (vertex normals), at 256², one thread ("per
 //! core"): path samples per second of the scalar path tracer and of the prototype on each
 //! backend this machine has, medians of 7 runs of 4 passes
 //! taken in turn in one process (so that load from other processes falls on all alike), with
@@ -183,8 +183,10 @@ fn main() {
     let cbox = Scene::load(&refs.join("cbox.xml"), &res).unwrap();
     pool.install(|| race("cbox (36 triangles)", &cbox, &backends));
     let dir = tempfile::tempdir().unwrap();
-    // Face normals: the prototype does not interpolate vertex normals.
-    let (bumpy, tris) = shared::bumpy_cbox(dir.path(), &res, true);
-    let name = format!("bumpy sphere in cbox ({}k triangles, face normals)", tris / 1000);
+    let (bumpy, tris) = shared::bumpy_cbox(dir.path(), &res, false);
+    let name = format!(
+        "bumpy sphere in cbox ({}k triangles, vertex normals)",
+        tris / 1000
+    );
     pool.install(|| race(&name, &bumpy, &backends));
 }

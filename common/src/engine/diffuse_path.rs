@@ -1,5 +1,5 @@
-//! The lane engine's prototype: path tracing of Lambertian triangles lit by area lights (the
-//! Cornell box), as the scalar path tracer does it (`integrator/path.rs`: the same depth, next
+//! The lane engine's prototype: path tracing of Lambertian triangles (flat or with vertex
+//! normals) lit by area lights (the Cornell box), as the scalar path tracer does it (`integrator/path.rs`: the same depth, next
 //! event estimation weighted by the power heuristic, Russian roulette and random numbers in the
 //! same order), but a film row's paths at once, eight per lane group.
 //!
@@ -7,11 +7,11 @@
 //! structure-of-arrays buffers (so lanes stay full as paths end, and loads are contiguous):
 //! closest hits (camera rays in eight-ray packets, bounce rays one at a time), shading in lanes
 //! (the surface, emission, the light sample, the BSDF sample, roulette), shadow rays (in
-//! packets: they head for one light), then compaction. Random numbers come from each path's own scalar [`Sampler`], so a path's
-//! numbers do not depend on its lane.
+//! packets: they head for one light), then compaction. Random numbers come from each path's
+//! own scalar [`Sampler`], so a path's numbers do not depend on its lane.
 //!
-//! What it leaves out, on purpose: everything the Cornell box does not use. [`DiffuseScene::new`]
-//! refuses other scenes.
+//! What it leaves out, on purpose: everything such scenes do not use. [`DiffuseScene::new`]
+//! refuses other scenes, which the scalar integrators render.
 
 use pulp::WithSimd;
 
@@ -37,8 +37,15 @@ pub struct Unsupported(String);
 #[derive(Clone, Copy, Debug)]
 struct Tri {
     p: [[f32; 3]; 3],
-    /// Unit geometric normal (flipped for `flip_normals`); also the shading normal.
+    /// Unit geometric normal (flipped for `flip_normals`).
     ng: [f32; 3],
+    /// Vertex normals, if the mesh has them (the shading normal interpolates them); zeros
+    /// otherwise (the shading normal is `ng`).
+    n: [[f32; 3]; 3],
+    /// Whether `n` holds vertex normals.
+    smooth: bool,
+    /// -1 for `flip_normals`, else 1.
+    flip: f32,
     reflectance: [f32; 3],
     /// Radiance from its front, if it emits.
     emission: [f32; 3],
@@ -70,9 +77,6 @@ impl DiffuseScene {
             let Primitive::Triangle(t) = prim else {
                 return no("a shape is not a triangle mesh");
             };
-            if t.n.is_some() {
-                return no("a mesh has vertex normals");
-            }
             let shape = &scene.shapes[t.shape as usize];
             let Bsdf::Diffuse(d) = &scene.bsdfs[shape.bsdf as usize] else {
                 return no("a material is not diffuse");
@@ -96,6 +100,9 @@ impl DiffuseScene {
             tris.push(Tri {
                 p: t.p.map(|p| p.to_array()),
                 ng: ng.to_array(),
+                n: t.n.as_ref().map_or([[0.0; 3]; 3], |n| n.map(|v| v.to_array())),
+                smooth: t.n.is_some(),
+                flip: if t.flip { -1.0 } else { 1.0 },
                 reflectance: r.to_array(),
                 emission,
                 light_density,
@@ -369,6 +376,27 @@ fn surface(tris: &[Tri], idx: &[u32; LANES], b1: F8, b2: F8) -> (V8, V8) {
     (p, err)
 }
 
+/// The shading normal at (b1, b2) of each lane's triangle, as `Triangle::surface` makes it:
+/// the vertex normals interpolated and normalised (by the reciprocal of the length, as glam's
+/// `normalize_or_zero`), negated for `flip_normals`; the geometric normal `ng` where the mesh
+/// has no vertex normals or they interpolate to zero.
+#[inline(always)]
+fn shading_normal(tris: &[Tri], idx: &[u32; LANES], b1: F8, b2: F8, ng: V8) -> V8 {
+    let smooth = M8::from_fn(|i| tris[idx[i] as usize].smooth);
+    if !smooth.any() {
+        return ng;
+    }
+    let n0 = gather3(tris, idx, |t| t.n[0]);
+    let n1 = gather3(tris, idx, |t| t.n[1]);
+    let n2 = gather3(tris, idx, |t| t.n[2]);
+    let b0 = 1.0 - b1 - b2;
+    let s = n0.scale(b0) + n1.scale(b1) + n2.scale(b2);
+    let rcp = 1.0 / s.dot(s).sqrt();
+    let ok = smooth & rcp.lt(F8::splat(f32::INFINITY)) & rcp.gt(F8::splat(0.0));
+    let flip = F8::from_fn(|i| tris[idx[i] as usize].flip);
+    V8::select(ok, s.scale(rcp * flip), ng)
+}
+
 /// `offset_ray_origin` in lanes: `p` moved just outside its error box, on the side of `n`
 /// that `w` leaves through, rounded away from `p`.
 #[inline(always)]
@@ -461,7 +489,10 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
         F8::load(&paths.b[0], start),
         F8::load(&paths.b[1], start),
     );
-    let n = gather3(&ds.tris, &idx, |t| t.ng);
+    let (b1, b2) = (F8::load(&paths.b[0], start), F8::load(&paths.b[1], start));
+    // Offsets and densities follow the geometric normal, shading the shading normal.
+    let ng = gather3(&ds.tris, &idx, |t| t.ng);
+    let n = shading_normal(&ds.tris, &idx, b1, b2, ng);
     let cos_o = -d.dot(n);
     let front = cos_o.gt(zero);
 
@@ -469,7 +500,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let le = gather3(&ds.tris, &idx, |t| t.emission);
     let density = F8::from_fn(|i| ds.tris[idx[i] as usize].light_density);
     let prev_pdf = F8::load(&paths.prev_pdf, start);
-    let light_pdf = t * t * density / cos_o.abs();
+    let light_pdf = t * t * density / d.dot(ng).abs();
     let w = (prev_pdf.eq(zero)).select(F8::splat(1.0), mis(prev_pdf, light_pdf));
     let found = front & live & le.x.gt(zero) | front & live & le.y.gt(zero) | front & live & le.z.gt(zero);
     let add = V8::select(
@@ -515,18 +546,27 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
         }
     }
     let root = (1.0 - u_x).sqrt();
-    let (lp, lerr) = surface(&ds.tris, &light_tri, 1.0 - root, u_l1 * root);
+    let (lb1, lb2) = (1.0 - root, u_l1 * root);
+    let (lp, lerr) = surface(&ds.tris, &light_tri, lb1, lb2);
     let ln = gather3(&ds.tris, &light_tri, |t| t.ng);
+    let lns = shading_normal(&ds.tris, &light_tri, lb1, lb2, ln);
     let lrad = gather3(&ds.tris, &light_tri, |t| t.emission);
     let ldensity = F8::from_fn(|i| ds.tris[light_tri[i] as usize].light_density);
     let to_light = lp - p;
     let dist2 = to_light.dot(to_light);
     let dist = dist2.sqrt();
     let wi = to_light.scale(1.0 / dist);
-    let cos_l = -ln.dot(wi);
+    // The light emits from the front of its shading normal; its density follows the geometric one.
+    let cos_l = ln.dot(wi).abs();
     let cos_i = n.dot(wi);
     let pdf_l = dist2 * ldensity / cos_l;
-    let lit = live & front & dist2.gt(zero) & cos_l.gt(zero) & cos_i.gt(zero) & pdf_l.gt(zero);
+    let lit = live
+        & front
+        & dist2.gt(zero)
+        & (-lns.dot(wi)).gt(zero)
+        & cos_i.gt(zero)
+        & pdf_l.gt(zero)
+        & pdf_l.lt(F8::splat(f32::INFINITY));
     let refl = gather3(&ds.tris, &idx, |t| t.reflectance);
     let f_over_pdf =
         cos_i * std::f32::consts::FRAC_1_PI * mis(pdf_l, cos_i * std::f32::consts::FRAC_1_PI) / pdf_l;
@@ -535,7 +575,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
         y: beta.y * refl.y * lrad.y * f_over_pdf,
         z: beta.z * refl.z * lrad.z * f_over_pdf,
     };
-    let so = offset(p, err, n, wi);
+    let so = offset(p, err, ng, wi);
     let target = offset(lp, lerr, ln, so - lp);
     store3(&mut paths.shadow_o, start, so);
     store3(&mut paths.shadow_d, start, target - so);
@@ -595,7 +635,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
         beta
     };
     live = live & (beta.x.gt(zero) | beta.y.gt(zero) | beta.z.gt(zero));
-    store3(&mut paths.o, start, offset(p, err, n, wo));
+    store3(&mut paths.o, start, offset(p, err, ng, wo));
     store3(&mut paths.d, start, wo);
     store3(&mut paths.beta, start, beta);
     pdf.store(&mut paths.prev_pdf, start);
@@ -611,9 +651,15 @@ mod tests {
     use super::*;
     use crate::render::{Method, RenderSettings, render_passes_on};
 
-    fn cbox(res: u32) -> Scene {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox.xml");
+    fn load(name: &str, res: u32) -> Scene {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../tests/refs")
+            .join(name);
         Scene::load(&path, &[("res".to_string(), res.to_string())]).unwrap()
+    }
+
+    fn cbox(res: u32) -> Scene {
+        load("cbox.xml", res)
     }
 
     fn lanes(scene: &Scene, backend: Backend, passes: std::ops::Range<u64>) -> FilmSum {
@@ -647,22 +693,47 @@ mod tests {
     /// another dimension (a roulette number drawn too early made 16%) shows.
     #[test]
     fn agrees_with_the_scalar_path_tracer_sample_by_sample() {
-        let scene = cbox(48);
-        let settings = RenderSettings {
-            seed: 7,
-            method: Method::Path(PathSettings::from_scene(&scene)),
-        };
-        let scalar = render_passes_on(&scene, &settings, 0..2, None).image().unwrap();
-        let ours = lanes(&scene, Backend::best(), 0..2).image().unwrap();
-        let sum = |c: &Rgb| c.to_array().iter().sum::<f32>() as f64;
-        let total: f64 = scalar.iter().map(sum).sum();
-        let diff: f64 = scalar
-            .iter()
-            .zip(&ours)
-            .map(|(a, b)| (sum(a) - sum(b)).abs())
-            .sum();
-        assert!(total > 100.0, "{total}");
-        assert!(diff / total < 1e-6, "mean relative difference {}", diff / total);
+        // cbox: flat triangles; meshes: a PLY with vertex normals, an OBJ of quads and a PLY
+        // with face normals, its metal and two-sided materials made diffuse.
+        for (name, res) in [("cbox.xml", 48), ("meshes.xml", 48)] {
+            let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../tests/refs")
+                .join(name);
+            let text = std::fs::read_to_string(&path).unwrap();
+            let text = match text.find("<bsdf type=\"roughconductor\">") {
+                Some(a) => {
+                    let b = a + text[a..].find("</bsdf>").unwrap() + "</bsdf>".len();
+                    format!("{}<bsdf type=\"diffuse\"/>{}", &text[..a], &text[b..])
+                }
+                None => text,
+            };
+            let text = text.replacen("<bsdf type=\"twosided\">", "", 1).replacen(
+                "</bsdf>\n        </bsdf>",
+                "</bsdf>",
+                1,
+            );
+            let scene = Scene::from_str(&text, &path, &[("res".to_string(), res.to_string())]).unwrap();
+            assert!(scene.bvh.primitives().len() > 36 || name == "cbox.xml");
+            let settings = RenderSettings {
+                seed: 7,
+                method: Method::Path(PathSettings::from_scene(&scene)),
+            };
+            let scalar = render_passes_on(&scene, &settings, 0..2, None).image().unwrap();
+            let ours = lanes(&scene, Backend::best(), 0..2).image().unwrap();
+            let sum = |c: &Rgb| c.to_array().iter().sum::<f32>() as f64;
+            let total: f64 = scalar.iter().map(sum).sum();
+            let diff: f64 = scalar
+                .iter()
+                .zip(&ours)
+                .map(|(a, b)| (sum(a) - sum(b)).abs())
+                .sum();
+            assert!(total > 100.0, "{name}: {total}");
+            assert!(
+                diff / total < 1e-6,
+                "{name}: mean relative difference {}",
+                diff / total
+            );
+        }
     }
 
     #[test]
