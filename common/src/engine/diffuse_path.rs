@@ -47,6 +47,10 @@ struct Tri {
     /// -1 for `flip_normals`, else 1.
     flip: f32,
     reflectance: [f32; 3],
+    /// A two-sided material's reflectance seen from the back.
+    back_reflectance: [f32; 3],
+    /// Whether the back scatters too (Mitsuba's `twosided`).
+    two_sided: bool,
     /// Radiance from its front, if it emits.
     emission: [f32; 3],
     /// Probability of picking its light over the light's area: the light sampling density per
@@ -78,11 +82,17 @@ impl DiffuseScene {
                 return no("a shape is not a triangle mesh");
             };
             let shape = &scene.shapes[t.shape as usize];
-            let Bsdf::Diffuse(d) = &scene.bsdfs[shape.bsdf as usize] else {
-                return no("a material is not diffuse");
+            let fixed = |b: &Bsdf| match b {
+                Bsdf::Diffuse(d) => match d.reflectance {
+                    Param::Fixed(r) => Ok(r.to_array()),
+                    Param::Textured(_) => Err(Unsupported("a reflectance is textured".into())),
+                },
+                _ => Err(Unsupported("a material is not diffuse".into())),
             };
-            let Param::Fixed(r) = d.reflectance else {
-                return no("a reflectance is textured");
+            // A two-sided material shades the back with its second BSDF, as the front.
+            let (reflectance, back) = match &scene.bsdfs[shape.bsdf as usize] {
+                Bsdf::TwoSided(pair) => (fixed(&pair.0)?, Some(fixed(&pair.1)?)),
+                b => (fixed(b)?, None),
             };
             let (mut emission, mut light_density) = ([0.0; 3], 0.0);
             if let Some(li) = shape.light {
@@ -103,7 +113,9 @@ impl DiffuseScene {
                 n: t.n.as_ref().map_or([[0.0; 3]; 3], |n| n.map(|v| v.to_array())),
                 smooth: t.n.is_some(),
                 flip: if t.flip { -1.0 } else { 1.0 },
-                reflectance: r.to_array(),
+                reflectance,
+                back_reflectance: back.unwrap_or([0.0; 3]),
+                two_sided: back.is_some(),
                 emission,
                 light_density,
             });
@@ -494,7 +506,13 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let ng = gather3(&ds.tris, &idx, |t| t.ng);
     let n = shading_normal(&ds.tris, &idx, b1, b2, ng);
     let cos_o = -d.dot(n);
+    // The side an emitter emits from, and the side the material scatters from: a two-sided
+    // material's back is shaded as a front with the local z flipped (`Bsdf::TwoSided`, whose
+    // front includes z = 0).
     let front = cos_o.gt(zero);
+    let back = M8::from_fn(|i| ds.tris[idx[i] as usize].two_sided) & cos_o.lt(zero);
+    let side = back.select(F8::splat(-1.0), F8::splat(1.0));
+    let scatters = (side * cos_o).gt(zero);
 
     // Emission found by the camera ray, or by BSDF sampling weighted against light sampling.
     let le = gather3(&ds.tris, &idx, |t| t.emission);
@@ -558,16 +576,20 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let wi = to_light.scale(1.0 / dist);
     // The light emits from the front of its shading normal; its density follows the geometric one.
     let cos_l = ln.dot(wi).abs();
-    let cos_i = n.dot(wi);
+    let cos_i = side * n.dot(wi);
     let pdf_l = dist2 * ldensity / cos_l;
     let lit = live
-        & front
+        & scatters
         & dist2.gt(zero)
         & (-lns.dot(wi)).gt(zero)
         & cos_i.gt(zero)
         & pdf_l.gt(zero)
         & pdf_l.lt(F8::splat(f32::INFINITY));
-    let refl = gather3(&ds.tris, &idx, |t| t.reflectance);
+    let refl = V8::select(
+        back,
+        gather3(&ds.tris, &idx, |t| t.back_reflectance),
+        gather3(&ds.tris, &idx, |t| t.reflectance),
+    );
     let f_over_pdf =
         cos_i * std::f32::consts::FRAC_1_PI * mis(pdf_l, cos_i * std::f32::consts::FRAC_1_PI) / pdf_l;
     let carry = V8 {
@@ -616,9 +638,9 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
         y: sign + n.y * n.y * a,
         z: -n.y,
     };
-    let wo = fs.scale(dx) + ft.scale(dy) + n.scale(dz);
+    let wo = fs.scale(dx) + ft.scale(dy) + n.scale(dz * side);
     let pdf = dz * std::f32::consts::FRAC_1_PI;
-    live = live & front & pdf.gt(zero);
+    live = live & scatters & pdf.gt(zero);
     let beta = V8 {
         x: beta.x * refl.x,
         y: beta.y * refl.y,
@@ -693,13 +715,39 @@ mod tests {
     /// another dimension (a roulette number drawn too early made 16%) shows.
     #[test]
     fn agrees_with_the_scalar_path_tracer_sample_by_sample() {
-        // cbox: flat triangles; meshes: a PLY with vertex normals, an OBJ of quads and a PLY
-        // with face normals, its metal and two-sided materials made diffuse.
-        for (name, res) in [("cbox.xml", 48), ("meshes.xml", 48)] {
+        // cbox: flat triangles; meshes: a PLY with vertex normals, an OBJ of quads in a
+        // two-sided material and a PLY with face normals, its metal made diffuse; cbox with its
+        // green wall turned round in a two-sided material with another colour behind, so that
+        // the room sees the wall's back.
+        let two_sided_back = |t: String| {
+            t.replacen(
+                "<bsdf type=\"diffuse\" id=\"green\">",
+                "<bsdf type=\"twosided\" id=\"green\"><bsdf type=\"diffuse\"/><bsdf type=\"diffuse\">",
+                1,
+            )
+            .replacen(
+                "</bsdf>\n    <bsdf type=\"diffuse\" id=\"red\">",
+                "</bsdf></bsdf>\n    <bsdf type=\"diffuse\" id=\"red\">",
+                1,
+            )
+            .replacen(
+                "<ref id=\"green\"/>",
+                "<ref id=\"green\"/><boolean name=\"flip_normals\" value=\"true\"/>",
+                1,
+            )
+        };
+        let same = |t: String| t;
+        let scenes: [(&str, &dyn Fn(String) -> String); 3] = [
+            ("cbox.xml", &same),
+            ("meshes.xml", &same),
+            ("cbox.xml", &two_sided_back),
+        ];
+        for (name, edit) in scenes {
+            let res = 48;
             let path = Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("../tests/refs")
                 .join(name);
-            let text = std::fs::read_to_string(&path).unwrap();
+            let text = edit(std::fs::read_to_string(&path).unwrap());
             let text = match text.find("<bsdf type=\"roughconductor\">") {
                 Some(a) => {
                     let b = a + text[a..].find("</bsdf>").unwrap() + "</bsdf>".len();
@@ -707,11 +755,6 @@ mod tests {
                 }
                 None => text,
             };
-            let text = text.replacen("<bsdf type=\"twosided\">", "", 1).replacen(
-                "</bsdf>\n        </bsdf>",
-                "</bsdf>",
-                1,
-            );
             let scene = Scene::from_str(&text, &path, &[("res".to_string(), res.to_string())]).unwrap();
             assert!(scene.bvh.primitives().len() > 36 || name == "cbox.xml");
             let settings = RenderSettings {
