@@ -51,6 +51,9 @@ struct Tri {
     back_reflectance: [f32; 3],
     /// Whether the back scatters too (Mitsuba's `twosided`).
     two_sided: bool,
+    /// Its (front, back) reflectances in [`DiffuseScene::textures`] if either is textured
+    /// (then `reflectance` and `back_reflectance` are unused), else [`NO_TEXTURE`].
+    texture: u32,
     /// Radiance from its front, if it emits.
     emission: [f32; 3],
     /// Probability of picking its light over the light's area: the light sampling density per
@@ -58,9 +61,14 @@ struct Tri {
     light_density: f32,
 }
 
+/// [`Tri::texture`] of a triangle whose reflectances are fixed.
+const NO_TEXTURE: u32 = u32::MAX;
+
 /// What the prototype needs of a scene, checked once.
 pub struct DiffuseScene {
     tris: Vec<Tri>,
+    /// Textured (front, back) reflectances, looked up lane by lane.
+    textures: Vec<(Param<Rgb>, Param<Rgb>)>,
     max_depth: u32,
     rr_depth: u32,
 }
@@ -77,23 +85,39 @@ impl DiffuseScene {
             return no("the film's filter is not a box");
         }
         let mut tris = Vec::with_capacity(scene.bvh.primitives().len());
+        let mut textures = Vec::new();
+        let mut texture_of = std::collections::HashMap::new();
         for prim in scene.bvh.primitives() {
             let Primitive::Triangle(t) = prim else {
                 return no("a shape is not a triangle mesh");
             };
             let shape = &scene.shapes[t.shape as usize];
-            let fixed = |b: &Bsdf| match b {
-                Bsdf::Diffuse(d) => match d.reflectance {
-                    Param::Fixed(r) => Ok(r.to_array()),
-                    Param::Textured(_) => Err(Unsupported("a reflectance is textured".into())),
-                },
+            let diffuse = |b: &Bsdf| match b {
+                Bsdf::Diffuse(d) => Ok(d.reflectance.clone()),
                 _ => Err(Unsupported("a material is not diffuse".into())),
             };
             // A two-sided material shades the back with its second BSDF, as the front.
-            let (reflectance, back) = match &scene.bsdfs[shape.bsdf as usize] {
-                Bsdf::TwoSided(pair) => (fixed(&pair.0)?, Some(fixed(&pair.1)?)),
-                b => (fixed(b)?, None),
+            let (front, back) = match &scene.bsdfs[shape.bsdf as usize] {
+                Bsdf::TwoSided(pair) => (diffuse(&pair.0)?, Some(diffuse(&pair.1)?)),
+                b => (diffuse(b)?, None),
             };
+            let two_sided = back.is_some();
+            let fixed = |p: &Param<Rgb>| match p {
+                Param::Fixed(r) => Some(r.to_array()),
+                Param::Textured(_) => None,
+            };
+            let (reflectance, back_reflectance, texture) =
+                match (fixed(&front), back.as_ref().map_or(Some([0.0; 3]), fixed)) {
+                    (Some(f), Some(b)) => (f, b, NO_TEXTURE),
+                    // One entry per material, whatever its triangles.
+                    _ => {
+                        let k = *texture_of.entry(shape.bsdf).or_insert_with(|| {
+                            textures.push((front.clone(), back.unwrap_or(front)));
+                            textures.len() as u32 - 1
+                        });
+                        ([0.0; 3], [0.0; 3], k)
+                    }
+                };
             let (mut emission, mut light_density) = ([0.0; 3], 0.0);
             if let Some(li) = shape.light {
                 let Light::Area(a) = &scene.lights[li as usize] else {
@@ -114,8 +138,9 @@ impl DiffuseScene {
                 smooth: t.n.is_some(),
                 flip: if t.flip { -1.0 } else { 1.0 },
                 reflectance,
-                back_reflectance: back.unwrap_or([0.0; 3]),
-                two_sided: back.is_some(),
+                back_reflectance,
+                two_sided,
+                texture,
                 emission,
                 light_density,
             });
@@ -129,6 +154,7 @@ impl DiffuseScene {
         }
         Ok(DiffuseScene {
             tris,
+            textures,
             max_depth: settings.max_depth.unwrap_or(u32::MAX),
             rr_depth: settings.rr_depth,
         })
@@ -388,6 +414,40 @@ fn surface(tris: &[Tri], idx: &[u32; LANES], b1: F8, b2: F8) -> (V8, V8) {
     (p, err)
 }
 
+/// Looks up the textured reflectances of the lanes of `mask` (the back's where `back`), one
+/// lane at a time, at the (u, v) `Triangle::surface` gives: the mesh's texture coordinates
+/// interpolated, or (b1, b2).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn textured_reflectance(
+    scene: &Scene,
+    ds: &DiffuseScene,
+    idx: &[u32; LANES],
+    mask: M8,
+    back: M8,
+    b1: F8,
+    b2: F8,
+    refl: &mut V8,
+) {
+    for (i, &tri) in idx.iter().enumerate() {
+        let k = ds.tris[tri as usize].texture;
+        if k == NO_TEXTURE || !mask.get(i) {
+            continue;
+        }
+        let Primitive::Triangle(t) = &scene.bvh.primitives()[tri as usize] else {
+            continue;
+        };
+        let (b1, b2) = (b1.0[i], b2.0[i]);
+        let uv = match &t.uv {
+            Some(tc) => (1.0 - b1 - b2) * tc[0] + b1 * tc[1] + b2 * tc[2],
+            None => glam::Vec2::new(b1, b2),
+        };
+        let (front, behind) = &ds.textures[k as usize];
+        let c = if back.get(i) { behind } else { front }.at(uv);
+        (refl.x.0[i], refl.y.0[i], refl.z.0[i]) = (c.x, c.y, c.z);
+    }
+}
+
 /// The shading normal at (b1, b2) of each lane's triangle, as `Triangle::surface` makes it:
 /// the vertex normals interpolated and normalised (by the reciprocal of the length, as glam's
 /// `normalize_or_zero`), negated for `flip_normals`; the geometric normal `ng` where the mesh
@@ -585,11 +645,12 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
         & cos_i.gt(zero)
         & pdf_l.gt(zero)
         & pdf_l.lt(F8::splat(f32::INFINITY));
-    let refl = V8::select(
+    let mut refl = V8::select(
         back,
         gather3(&ds.tris, &idx, |t| t.back_reflectance),
         gather3(&ds.tris, &idx, |t| t.reflectance),
     );
+    textured_reflectance(scene, ds, &idx, live & scatters, back, b1, b2, &mut refl);
     let f_over_pdf =
         cos_i * std::f32::consts::FRAC_1_PI * mis(pdf_l, cos_i * std::f32::consts::FRAC_1_PI) / pdf_l;
     let carry = V8 {
@@ -736,11 +797,45 @@ mod tests {
                 1,
             )
         };
+        // cbox with textures: a bilinear PNG on the floor (the rectangle's own uv), a
+        // checkerboard on the red wall, and an OBJ strip with texture coordinates in a
+        // two-sided material with a nearest, mirrored PNG.
+        let textured = |t: String| {
+            let bitmap = |extra: &str| {
+                format!(
+                    "<bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">\
+                     <string name=\"filename\" value=\"textures/colors.png\"/>{extra}</texture></bsdf>"
+                )
+            };
+            let at = |t: &str, shape: &str| {
+                let a = t.find(shape).unwrap();
+                a + t[a..].find("<ref id=").unwrap()
+            };
+            let floor = at(&t, "id=\"floor\"");
+            let end = floor + t[floor..].find("/>").unwrap() + 2;
+            let t = format!("{}{}{}", &t[..floor], bitmap(""), &t[end..]);
+            let wall = at(&t, "id=\"red-wall\"");
+            let end = wall + t[wall..].find("/>").unwrap() + 2;
+            let checks = "<bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\">\
+                          <transform name=\"to_uv\"><scale x=\"4\" y=\"3\"/></transform></texture></bsdf>";
+            let t = format!("{}{}{}", &t[..wall], checks, &t[end..]);
+            let strip = format!(
+                "<shape type=\"obj\"><string name=\"filename\" value=\"textures/strip.obj\"/>\
+                 <transform name=\"to_world\"><scale x=\"0.55\" y=\"0.45\"/><rotate y=\"1\" angle=\"-25\"/>\
+                 <translate x=\"0.2\" y=\"0.3\" z=\"-0.5\"/></transform><bsdf type=\"twosided\">{}</bsdf></shape>\n</scene>",
+                bitmap(
+                    "<string name=\"filter_type\" value=\"nearest\"/><string name=\"wrap_mode\" value=\"mirror\"/>\
+                        <transform name=\"to_uv\"><scale x=\"3\" y=\"1.5\"/></transform>"
+                )
+            );
+            t.replacen("</scene>", &strip, 1)
+        };
         let same = |t: String| t;
-        let scenes: [(&str, &dyn Fn(String) -> String); 3] = [
+        let scenes: [(&str, &dyn Fn(String) -> String); 4] = [
             ("cbox.xml", &same),
             ("meshes.xml", &same),
             ("cbox.xml", &two_sided_back),
+            ("cbox.xml", &textured),
         ];
         for (name, edit) in scenes {
             let res = 48;
