@@ -91,11 +91,12 @@ pub fn render_passes_on(
     lanes: Option<Backend>,
 ) -> FilmSum {
     match &settings.method {
-        Method::Path(p) => match (lanes, DiffuseScene::new(scene, p)) {
-            (None, _) | (_, Err(_)) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
+        // The lane engine's scene is made only when the lanes are asked for.
+        Method::Path(p) => match lanes.and_then(|b| Some((b, DiffuseScene::new(scene, p).ok()?))) {
+            None => camera_passes(scene, settings.seed, passes, |ray, sampler| {
                 path::radiance(scene, p, Share::All, ray, sampler)
             }),
-            (Some(backend), Ok(ds)) => {
+            Some((backend, ds)) => {
                 let mut film = FilmSum::new(scene.width(), scene.height());
                 for pass in passes {
                     diffuse_path::render_pass(scene, &ds, settings.seed, pass, backend, &mut film);

@@ -1,7 +1,8 @@
 //! The lane engine's prototype: path tracing of Lambertian triangles (flat or with vertex
-//! normals) lit by area lights (the Cornell box), as the scalar path tracer does it (`integrator/path.rs`: the same depth, next
-//! event estimation weighted by the power heuristic, Russian roulette and random numbers in the
-//! same order), but a film row's paths at once, eight per lane group.
+//! normals) lit by area lights (the Cornell box), as the scalar path tracer does it
+//! (`integrator/path.rs`: the same depth, next event estimation weighted by the power
+//! heuristic, Russian roulette and random numbers in the same order), but a film row's paths
+//! at once, eight per lane group.
 //!
 //! Each bounce runs in stages over the row's live paths, which stay packed at the front of
 //! structure-of-arrays buffers (so lanes stay full as paths end, and loads are contiguous):
@@ -539,15 +540,7 @@ fn draw<const K: usize>(paths: &mut Paths, start: usize, live: M8) -> [F8; K] {
 fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &mut [Rgb], scene: &Scene) {
     let zero = F8::splat(0.0);
     let mut live = M8::from_fn(|i| paths.alive[start + i]);
-    store3(
-        &mut paths.shadow_l,
-        start,
-        V8 {
-            x: zero,
-            y: zero,
-            z: zero,
-        },
-    );
+    store3(&mut paths.shadow_l, start, V8::splat([0.0; 3]));
     if !live.any() {
         return;
     }
@@ -555,13 +548,8 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let d = load3(&paths.d, start);
     let beta = load3(&paths.beta, start);
     let t = F8::load(&paths.t, start);
-    let (p, err) = surface(
-        &ds.tris,
-        &idx,
-        F8::load(&paths.b[0], start),
-        F8::load(&paths.b[1], start),
-    );
     let (b1, b2) = (F8::load(&paths.b[0], start), F8::load(&paths.b[1], start));
+    let (p, err) = surface(&ds.tris, &idx, b1, b2);
     // Offsets and densities follow the geometric normal, shading the shading normal.
     let ng = gather3(&ds.tris, &idx, |t| t.ng);
     let n = shading_normal(&ds.tris, &idx, b1, b2, ng);
@@ -580,21 +568,8 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let prev_pdf = F8::load(&paths.prev_pdf, start);
     let light_pdf = t * t * density / d.dot(ng).abs();
     let w = (prev_pdf.eq(zero)).select(F8::splat(1.0), mis(prev_pdf, light_pdf));
-    let found = front & live & le.x.gt(zero) | front & live & le.y.gt(zero) | front & live & le.z.gt(zero);
-    let add = V8::select(
-        found,
-        le.scale(w),
-        V8 {
-            x: zero,
-            y: zero,
-            z: zero,
-        },
-    );
-    let add = V8 {
-        x: beta.x * add.x,
-        y: beta.y * add.y,
-        z: beta.z * add.z,
-    };
+    let found = front & live & (le.x.gt(zero) | le.y.gt(zero) | le.z.gt(zero));
+    let add = beta * V8::select(found, le.scale(w), V8::splat([0.0; 3]));
     for i in 0..LANES {
         if found.get(i) {
             out[paths.pixel[start + i] as usize] += Rgb::new(add.x.0[i], add.y.0[i], add.z.0[i]);
@@ -653,11 +628,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     textured_reflectance(scene, ds, &idx, live & scatters, back, b1, b2, &mut refl);
     let f_over_pdf =
         cos_i * std::f32::consts::FRAC_1_PI * mis(pdf_l, cos_i * std::f32::consts::FRAC_1_PI) / pdf_l;
-    let carry = V8 {
-        x: beta.x * refl.x * lrad.x * f_over_pdf,
-        y: beta.y * refl.y * lrad.y * f_over_pdf,
-        z: beta.z * refl.z * lrad.z * f_over_pdf,
-    };
+    let carry = (beta * refl * lrad).scale(f_over_pdf);
     let so = offset(p, err, ng, wi);
     let target = offset(lp, lerr, ln, so - lp);
     store3(&mut paths.shadow_o, start, so);
@@ -665,15 +636,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     store3(
         &mut paths.shadow_l,
         start,
-        V8::select(
-            lit,
-            carry,
-            V8 {
-                x: zero,
-                y: zero,
-                z: zero,
-            },
-        ),
+        V8::select(lit, carry, V8::splat([0.0; 3])),
     );
 
     // The BSDF sample: a cosine-weighted direction by the concentric map, in the frame of the
@@ -702,11 +665,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let wo = fs.scale(dx) + ft.scale(dy) + n.scale(dz * side);
     let pdf = dz * std::f32::consts::FRAC_1_PI;
     live = live & scatters & pdf.gt(zero);
-    let beta = V8 {
-        x: beta.x * refl.x,
-        y: beta.y * refl.y,
-        z: beta.z * refl.z,
-    };
+    let beta = beta * refl;
 
     // Roulette from the scalar tracer's depth on (its depth counts this bounce).
     let beta = if depth + 1 > ds.rr_depth {

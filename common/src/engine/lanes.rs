@@ -330,6 +330,19 @@ impl Add for V8 {
     }
 }
 
+/// Lane-wise and component-wise product (colours times colours).
+impl Mul for V8 {
+    type Output = V8;
+    #[inline(always)]
+    fn mul(self, o: V8) -> V8 {
+        V8 {
+            x: self.x * o.x,
+            y: self.y * o.y,
+            z: self.z * o.z,
+        }
+    }
+}
+
 impl Sub for V8 {
     type Output = V8;
     #[inline(always)]

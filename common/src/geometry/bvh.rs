@@ -217,18 +217,9 @@ impl Bvh {
     pub fn occluded8(&self, rays: &Rays8) -> M8 {
         match &self.accel {
             Accel::Own(nodes) => packet::occluded(nodes, &self.prims, rays),
-            _ => {
-                let hits = self.lane_by_lane(rays, |ray, t_max| {
-                    self.occluded(ray, t_max).then_some(Hit {
-                        t: 0.0,
-                        prim: 0,
-                        b1: 0.0,
-                        b2: 0.0,
-                        inner: 0,
-                    })
-                });
-                hits.found
-            }
+            _ => M8::from_fn(|lane| {
+                rays.active.get(lane) && self.occluded(&rays.ray(lane), rays.t_max.0[lane])
+            }),
         }
     }
 
