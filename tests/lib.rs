@@ -8,7 +8,7 @@ use photonfarm::film::{FilmSum, read_image};
 use photonfarm::integrator::path::PathSettings;
 use photonfarm::integrator::sppm::SppmSettings;
 use photonfarm::job::JobSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes};
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::scene::Scene;
 
 /// The folder of checked-in references and test scenes.
@@ -83,7 +83,7 @@ pub fn load(path: &Path, defines: &[(&str, &str)]) -> Scene {
 
 /// Renders passes [0, passes) with `method`.
 pub fn render_with(scene: &Scene, method: Method, passes: u64, seed: u64) -> FilmSum {
-    render_passes(scene, &RenderSettings { seed, method }, 0..passes)
+    Renderer::new(scene, &RenderSettings { seed, method }).passes(0..passes)
 }
 
 /// Renders passes [0, spp) with the path tracer.
@@ -117,7 +117,7 @@ pub fn render_as_declared(scene: &Scene, spp: u64, seed: u64) -> FilmSum {
         ..JobSettings::default()
     };
     let resolved = settings.resolve(scene, false).unwrap_or_else(|e| panic!("{e}"));
-    render_passes(scene, &resolved.render, 0..spp)
+    Renderer::new(scene, &resolved.render).passes(0..spp)
 }
 
 /// The spp at which a reference's channel means are compared, if not the test's.

@@ -3,9 +3,10 @@
 //! contract with volume photons.
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
 use photonfarm::integrator::sppm::{SppmSettings, VolumeEstimate};
-use photonfarm::render::render_sppm_iterations;
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm_tests::{
     Comparison, channel_means, compare, load, noise_floor, reference, refs_dir, render_path, render_sppm,
     scenes_dir, sppm_settings,
@@ -196,14 +197,17 @@ fn split_and_merge_is_bit_exact_in_fog() {
     ] {
         let settings = sppm_settings(&scene, 3_000).with_volume_estimate(estimate);
         let radii = settings.radii(0..6);
+        let method = RenderSettings {
+            seed: 5,
+            method: Method::Sppm(settings),
+        };
         let render = |threads: usize, a: u64, b: u64| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| {
-                render_sppm_iterations(&scene, 5, &settings, a..b, &radii[a as usize..b as usize])
-            })
+            let (r, never) = (&radii[a as usize..b as usize], AtomicBool::new(false));
+            pool.install(|| Renderer::new(&scene, &method).render(a..b, Some(r), &never).sum)
         };
         let whole = render(2, 0, 6);
         let mut merged = render(1, 4, 6);

@@ -1,7 +1,7 @@
 //! The particle tracer against Mitsuba 3's `ptracer`, and the pass contract the farm is built on.
 
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes};
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::scene::Scene;
 use photonfarm_tests::{check_convergence, load, refs_dir, render_as_declared};
 
@@ -17,7 +17,7 @@ fn settings(scene: &Scene, seed: u64) -> RenderSettings {
 fn check_against_mitsuba(scene: &Scene, name: &str) {
     let s = settings(scene, 1);
     check_convergence(&format!("{name}, ptracer"), name, (16, 256), 0.01, |n| {
-        render_passes(scene, &s, 0..n)
+        Renderer::new(scene, &s).passes(0..n)
     });
 }
 
@@ -31,7 +31,7 @@ fn spot_caustic_matches_mitsuba_ptracer() {
     let small = load(&refs_dir().join("caustic.xml"), &[("res", "32")]);
     assert_eq!(
         render_as_declared(&small, 2, 5),
-        render_passes(&small, &settings(&small, 5), 0..2)
+        Renderer::new(&small, &settings(&small, 5)).passes(0..2)
     );
 }
 
@@ -62,9 +62,9 @@ fn split_passes_and_threads_give_the_same_sums() {
     let scene = load(&refs_dir().join("lights.xml"), &[("res", "24")]);
     let s = settings(&scene, 9);
     let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
-    let whole = pool(2).install(|| render_passes(&scene, &s, 0..8));
-    let mut parts = pool(1).install(|| render_passes(&scene, &s, 3..8));
-    parts.add(&render_passes(&scene, &s, 0..3)).unwrap();
+    let whole = pool(2).install(|| Renderer::new(&scene, &s).passes(0..8));
+    let mut parts = pool(1).install(|| Renderer::new(&scene, &s).passes(3..8));
+    parts.add(&Renderer::new(&scene, &s).passes(0..3)).unwrap();
     assert_eq!(parts, whole);
     assert!(whole.sums.iter().any(|p| p.iter().any(|&c| c > 0)));
 }

@@ -1,7 +1,9 @@
 //! SPPM against Mitsuba 3's references and the analytic sphere, and the iteration contract
 //! that the farm is built on.
 
-use photonfarm::render::{Method, RenderSettings, render_passes, render_sppm_iterations};
+use std::sync::atomic::AtomicBool;
+
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm_tests::{
     channel_means, check_sppm_convergence, load, refs_dir, render_sppm, scenes_dir, sppm_settings,
 };
@@ -63,31 +65,35 @@ fn split_and_merge_is_bit_exact() {
     let scene = load(&refs_dir().join("cbox-spheres.xml"), &[("res", "40")]);
     let settings = sppm_settings(&scene, 5_000);
     let radii = settings.radii(0..16);
-    let render = |threads: usize, range: std::ops::Range<u64>| {
+    let render_settings = RenderSettings {
+        seed: 7,
+        method: Method::Sppm(settings),
+    };
+    // One renderer for every range, as a worker keeps one for a batch: the photon buffers and
+    // maps it reuses carry nothing from one iteration to the next.
+    let mut renderer = Renderer::new(&scene, &render_settings);
+    let never = AtomicBool::new(false);
+    let mut render = |threads: usize, range: std::ops::Range<u64>, radii: &[[f32; 2]]| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         let r = &radii[range.start as usize..range.end as usize];
-        pool.install(|| render_sppm_iterations(&scene, 7, &settings, range, r))
+        pool.install(|| renderer.render(range, Some(r), &never).sum)
     };
-    let whole = render(2, 0..16);
-    let mut merged = render(1, 8..16);
-    merged.add(&render(3, 0..3)).unwrap();
-    merged.add(&render(2, 3..8)).unwrap();
+    let whole = render(2, 0..16, &radii);
+    let mut merged = render(1, 8..16, &radii);
+    merged.add(&render(3, 0..3, &radii)).unwrap();
+    merged.add(&render(2, 3..8, &radii)).unwrap();
     assert_eq!(whole, merged);
     assert_eq!(whole.passes, 16);
-    assert_eq!(whole, render(1, 0..16));
-    // The same as the schedule-driven entry point used by `coordinator render`.
-    let via_settings = RenderSettings {
-        seed: 7,
-        method: Method::Sppm(settings),
-    };
-    assert_eq!(whole, render_passes(&scene, &via_settings, 0..16));
+    assert_eq!(whole, render(1, 0..16, &radii));
     // A different radius for one iteration changes the result: radii are really used.
     let mut other = radii.clone();
     other[5][0] *= 2.0;
-    assert_ne!(whole, render_sppm_iterations(&scene, 7, &settings, 0..16, &other));
+    assert_ne!(whole, render(1, 0..16, &other));
+    // The same as with the settings' own schedule, as `coordinator render` takes it.
+    assert_eq!(whole, Renderer::new(&scene, &render_settings).passes(0..16));
 }
 
 #[test]

@@ -18,7 +18,7 @@ use photonfarm::engine::lanes::{F8, LANES, M8, V8};
 use photonfarm::film::FilmSum;
 use photonfarm::geometry::{Ray, Rays8};
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes_on};
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::scene::Scene;
 
 mod shared;
@@ -138,6 +138,16 @@ fn traversal(scene: &Scene, backends: &[Backend]) {
 fn race(name: &str, scene: &Scene, backends: &[Backend]) {
     let path = PathSettings::from_scene(scene);
     let ds = DiffuseScene::new(scene, &path).unwrap();
+    // What a worker paid per pass before `Renderer` made the lane scene once per batch.
+    let build = median(
+        (0..RUNS)
+            .map(|_| {
+                let t = Instant::now();
+                std::hint::black_box(DiffuseScene::new(scene, &path).unwrap());
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect(),
+    );
     let settings = RenderSettings {
         seed: 0,
         method: Method::Path(path),
@@ -148,7 +158,7 @@ fn race(name: &str, scene: &Scene, backends: &[Backend]) {
     for run in 0..RUNS as u64 {
         let passes = run * PASSES..(run + 1) * PASSES;
         let t = Instant::now();
-        std::hint::black_box(render_passes_on(scene, &settings, passes.clone(), None));
+        std::hint::black_box(Renderer::on(scene, &settings, None).passes(passes.clone()));
         rates[0].push(samples / t.elapsed().as_secs_f64() / 1e6);
         for (k, &b) in backends.iter().enumerate() {
             let mut film = FilmSum::new(scene.width(), scene.height());
@@ -163,6 +173,8 @@ fn race(name: &str, scene: &Scene, backends: &[Backend]) {
     let scalar = median(rates[0].clone());
     println!("{name}, 256², 1 thread, medians of {RUNS} runs of {PASSES} passes");
     println!("{:<24} {:>8.3} M samples/s", "scalar path tracer", scalar);
+    let pass_ms = (scene.width() * scene.height()) as f64 / median(rates[1].clone()) / 1e3;
+    println!("lane scene made in {build:.2} ms; a pass on {} takes {pass_ms:.1} ms", backends[0]);
     for (k, b) in backends.iter().enumerate() {
         let m = median(rates[k + 1].clone());
         println!(

@@ -16,7 +16,7 @@ use std::time::Instant;
 use glam::Vec2;
 use photonfarm::geometry::Frame;
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::render::{Method, RenderSettings, render_passes_on};
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::sampling::{Sampler, Stream, square_to_cosine_hemisphere};
 use photonfarm::scene::Scene;
 #[cfg(feature = "obvhs")]
@@ -86,7 +86,7 @@ fn bench(name: &str, scene: &Scene) {
         let (_, n) = ray_mix(scene, run);
         mix.push(n as f64 / t.elapsed().as_secs_f64());
         let t = Instant::now();
-        pool.install(|| render_passes_on(scene, &settings, run..run + 1, None));
+        pool.install(|| Renderer::on(scene, &settings, None).passes(run..run + 1));
         paths.push((scene.width() * scene.height()) as f64 / t.elapsed().as_secs_f64());
     }
     println!(

@@ -12,7 +12,7 @@ use std::time::Instant;
 use glam::Vec2;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use photonfarm::integrator::sppm::{self, GatherContext, PhotonMap, SppmSettings, VolumeMap};
-use photonfarm::render::{Method, RenderSettings, render_passes};
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::sampling::{Sampler, Stream};
 use photonfarm::scene::Scene;
 
@@ -157,7 +157,7 @@ fn main() {
     let mut whole = Vec::new();
     for run in 0..RUNS as u64 {
         let t = Instant::now();
-        render_passes(&scene, &render, run..run + 1);
+        Renderer::new(&scene, &render).passes(run..run + 1);
         whole.push(t.elapsed().as_secs_f64());
     }
     println!(
@@ -183,7 +183,7 @@ fn main() {
         let mut times = Vec::new();
         for run in 0..RUNS as u64 {
             let t = Instant::now();
-            render_passes(&scene, &render, run..run + 1);
+            Renderer::new(&scene, &render).passes(run..run + 1);
             times.push(t.elapsed().as_secs_f64());
         }
         let mut buffers = sppm::PhotonBuffers::default();

@@ -89,6 +89,14 @@ impl FilmSum {
         }
     }
 
+    /// Empties the sum, keeping its pixels' memory (a renderer's reused pass).
+    pub fn clear(&mut self) {
+        self.sums.fill([0; 3]);
+        self.weights.clear();
+        self.passes = 0;
+        self.nonfinite = 0;
+    }
+
     /// Adds another sum: exact, so the order of additions never matters.
     pub fn add(&mut self, other: &FilmSum) -> Result<(), FilmError> {
         if (self.width, self.height) != (other.width, other.height) {

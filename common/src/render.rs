@@ -4,6 +4,7 @@
 //! the sum of a pass range is the same whichever thread, machine or batch renders it.
 
 use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
@@ -22,6 +23,7 @@ use crate::integrator::sppm::{
 };
 use crate::integrator::{Share, ptracer};
 use crate::job::Integrator;
+use crate::parity::OddSums;
 use crate::sampling::{Sampler, Stream};
 use crate::scene::Scene;
 
@@ -73,146 +75,202 @@ pub struct RenderSettings {
     pub method: Method,
 }
 
-/// Renders passes `passes` in the current rayon pool, on the process's backend
-/// ([`Backend::current`], `PHOTONFARM_SIMD`). For SPPM the radii come from the settings'
-/// schedule; [`render_sppm_iterations`] takes them from the caller instead.
-pub fn render_passes(scene: &Scene, settings: &RenderSettings, passes: Range<u64>) -> FilmSum {
-    render_passes_on(scene, settings, passes, Some(Backend::current()))
+/// Renders a scene's passes with one method: the one entry point of `coordinator render`, the
+/// worker, `converge`, the benches and the tests.
+///
+/// It owns what passes reuse, made once per render or per worker batch rather than per pass:
+/// the lane engine's scene (a table of every triangle) and SPPM's photon buffers and maps.
+/// Passes run in the current rayon pool.
+pub struct Renderer<'s> {
+    scene: &'s Scene,
+    settings: RenderSettings,
+    /// The lane engine's backend and scene, where the engine models the scene for the method
+    /// (so far the path tracer on Lambertian triangles lit by area lights:
+    /// `engine::diffuse_path`).
+    lanes: Option<(Backend, DiffuseScene)>,
+    sppm: SppmBuffers,
+    /// An odd pass's own sum, for [`Batch::odd`].
+    part: FilmSum,
 }
 
-/// [`render_passes`] on `lanes`: the path tracer runs in the lane engine on that backend where
-/// the engine models the scene (so far Lambertian triangles lit by area lights:
-/// `engine::diffuse_path`), with the same bytes on every backend; everything else runs on the
-/// scalar integrators, and so does everything with `None` (the benches' and tests' reference).
-pub fn render_passes_on(
-    scene: &Scene,
-    settings: &RenderSettings,
-    passes: Range<u64>,
-    lanes: Option<Backend>,
-) -> FilmSum {
-    match &settings.method {
-        // The lane engine's scene is made only when the lanes are asked for.
-        Method::Path(p) => match lanes.and_then(|b| Some((b, DiffuseScene::new(scene, p).ok()?))) {
-            None => camera_passes(scene, settings.seed, passes, |ray, sampler| {
-                path::radiance(scene, p, Share::All, ray, sampler)
-            }),
-            Some((backend, ds)) => {
-                let mut film = FilmSum::new(scene.width(), scene.height());
-                for pass in passes {
-                    diffuse_path::render_pass(scene, &ds, settings.seed, pass, backend, &mut film);
-                }
-                film
+/// Passes rendered by [`Renderer::render`].
+#[derive(Debug)]
+pub struct Batch {
+    /// Their sum; `sum.passes` says how many were rendered before a stop.
+    pub sum: FilmSum,
+    /// Their odd passes' sums on the sampled pixels, for the farm's noise estimate
+    /// ([`crate::parity`]).
+    pub odd: OddSums,
+}
+
+/// What SPPM's iterations reuse: memory depends on the photon count, not on the iterations.
+#[derive(Default)]
+struct SppmBuffers {
+    photons: PhotonBuffers,
+    map: PhotonMap,
+    point_map: PhotonMap,
+    beam_map: BeamMap,
+    flights: PhotonBeamMap,
+}
+
+impl<'s> Renderer<'s> {
+    /// A renderer on the process's backend ([`Backend::current`], `PHOTONFARM_SIMD`).
+    pub fn new(scene: &'s Scene, settings: &RenderSettings) -> Renderer<'s> {
+        Renderer::on(scene, settings, Some(Backend::current()))
+    }
+
+    /// A renderer whose path tracer runs in the lane engine on `lanes` where the engine models
+    /// the scene, with the same bytes on every backend; everything else runs on the scalar
+    /// integrators, and so does everything with `None` (the benches' and tests' reference).
+    pub fn on(scene: &'s Scene, settings: &RenderSettings, lanes: Option<Backend>) -> Renderer<'s> {
+        let lanes = match (&settings.method, lanes) {
+            // The lane engine's scene is made only when the lanes are asked for.
+            (Method::Path(p), Some(b)) => DiffuseScene::new(scene, p).ok().map(|ds| (b, ds)),
+            _ => None,
+        };
+        Renderer {
+            scene,
+            settings: *settings,
+            lanes,
+            sppm: SppmBuffers::default(),
+            part: FilmSum::new(scene.width(), scene.height()),
+        }
+    }
+
+    /// The sum of passes `passes`.
+    pub fn passes(&mut self, passes: Range<u64>) -> FilmSum {
+        self.run(passes, None, &AtomicBool::new(false), None)
+    }
+
+    /// Renders passes `passes`, in order, until `stop` is set (checked before each pass). For
+    /// SPPM, `radii` holds the (surface, volume) radii of each pass (the coordinator's
+    /// schedule), or `None` to take them from the settings; the other methods ignore it.
+    ///
+    /// Panics if `radii` does not hold one pair per pass: callers check what they were sent.
+    pub fn render(&mut self, passes: Range<u64>, radii: Option<&[[f32; 2]]>, stop: &AtomicBool) -> Batch {
+        let (w, h) = (self.scene.width(), self.scene.height());
+        let mut odd = OddSums::empty(w, h);
+        let sum = self.run(passes, radii, stop, Some(&mut odd));
+        Batch { sum, odd }
+    }
+
+    fn run(
+        &mut self,
+        passes: Range<u64>,
+        radii: Option<&[[f32; 2]]>,
+        stop: &AtomicBool,
+        mut odd: Option<&mut OddSums>,
+    ) -> FilmSum {
+        let schedule;
+        let radii = match (&self.settings.method, radii) {
+            (_, Some(r)) => {
+                assert_eq!(
+                    r.len() as u64,
+                    passes.end - passes.start,
+                    "one radius pair per pass"
+                );
+                r
             }
-        },
-        Method::Direct(d) => camera_passes(scene, settings.seed, passes, |ray, sampler| {
-            direct_illumination::radiance(scene, d, ray, sampler)
-        }),
-        Method::Sppm(s) => {
-            let radii = s.radii(passes.clone());
-            render_sppm_iterations(scene, settings.seed, s, passes, &radii)
+            (Method::Sppm(s), None) => {
+                schedule = s.radii(passes.clone());
+                &schedule[..]
+            }
+            _ => &[][..],
+        };
+        let mut film = FilmSum::new(self.scene.width(), self.scene.height());
+        for (k, pass) in passes.enumerate() {
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let radii = radii.get(k).copied().unwrap_or([0.0; 2]);
+            match odd.as_deref_mut() {
+                Some(odd) if pass % 2 == 1 => {
+                    let mut part = std::mem::replace(&mut self.part, FilmSum::new(0, 0));
+                    part.clear();
+                    self.add_pass(pass, radii, &mut part);
+                    odd.add(&OddSums::of(&part));
+                    film.add(&part).expect("one scene, one size");
+                    self.part = part;
+                }
+                _ => self.add_pass(pass, radii, &mut film),
+            }
         }
-        Method::Ptracer(p) => light_path_passes(scene, p, Share::All, settings.seed, passes),
-        Method::Hybrid(p) => light_path_passes(scene, p, Share::LightSide, settings.seed, passes),
+        film
+    }
+
+    /// Adds pass `pass` to `film`; `radii` are SPPM's (surface, volume) radii.
+    fn add_pass(&mut self, pass: u64, radii: [f32; 2], film: &mut FilmSum) {
+        let (scene, seed) = (self.scene, self.settings.seed);
+        match &self.settings.method {
+            Method::Path(p) => match &self.lanes {
+                None => add_pixel_samples(scene, film, seed, pass, |ray, sampler| {
+                    path::radiance(scene, p, Share::All, ray, sampler)
+                }),
+                Some((backend, ds)) => diffuse_path::render_pass(scene, ds, seed, pass, *backend, film),
+            },
+            Method::Direct(d) => add_pixel_samples(scene, film, seed, pass, |ray, sampler| {
+                direct_illumination::radiance(scene, d, ray, sampler)
+            }),
+            Method::Sppm(s) => sppm_iteration(scene, seed, s, pass, radii, &mut self.sppm, film),
+            Method::Ptracer(p) => light_path_pass(scene, p, Share::All, seed, pass, film),
+            Method::Hybrid(p) => light_path_pass(scene, p, Share::LightSide, seed, pass, film),
+        }
     }
 }
 
-/// Renders passes `passes` of a batch: the farm's unit of work. For SPPM, `radii` holds the
-/// (surface, volume) radii of each pass (from the coordinator); for path tracing it is ignored.
-pub fn render_batch(
-    scene: &Scene,
-    settings: &RenderSettings,
-    passes: Range<u64>,
-    radii: &[[f32; 2]],
-) -> FilmSum {
-    match &settings.method {
-        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) | Method::Hybrid(_) => {
-            render_passes(scene, settings, passes)
-        }
-        Method::Sppm(s) => render_sppm_iterations(scene, settings.seed, s, passes, radii),
-    }
-}
-
-/// Renders SPPM iterations `iterations` with the given (surface, volume) radii, one pair per
-/// iteration.
-pub fn render_sppm_iterations(
+/// Adds SPPM iteration `iteration` with (surface, volume) radii `radii` to `film`.
+fn sppm_iteration(
     scene: &Scene,
     seed: u64,
     settings: &SppmSettings,
-    iterations: Range<u64>,
-    radii: &[[f32; 2]],
-) -> FilmSum {
-    assert_eq!(
-        radii.len() as u64,
-        iterations.end - iterations.start,
-        "one radius per iteration"
-    );
-    let mut film = FilmSum::new(scene.width(), scene.height());
+    iteration: u64,
+    [radius, volume_radius]: [f32; 2],
+    buffers: &mut SppmBuffers,
+    film: &mut FilmSum,
+) {
     let max_depth = settings.max_depth.unwrap_or(u32::MAX);
-    // Reused across iterations: memory depends on the photon count, not on the iterations.
-    let mut photons = PhotonBuffers::default();
-    let mut map = PhotonMap::new();
-    let mut point_map = PhotonMap::new();
-    let mut beam_map = BeamMap::new();
-    let mut flights = PhotonBeamMap::new();
-    let record = settings.volume_record();
-    let beam_bounds = scene
-        .bounds()
-        .grow(scene.camera.to_world.transform_point3a(Vec3A::ZERO));
-    for (iteration, &[radius, volume_radius]) in iterations.zip(radii) {
-        sppm::trace_photons(
-            scene,
-            seed,
-            iteration,
-            settings.photons,
-            max_depth,
-            record,
-            &mut photons,
-        );
-        map.build(&photons.surface, radius);
-        let volume_map = match settings.volume_estimate {
-            VolumeEstimate::Beam => {
-                beam_map.build(&photons.volume, volume_radius);
-                VolumeMap::Beam(&beam_map)
-            }
-            VolumeEstimate::Point => {
-                point_map.build(&photons.volume, volume_radius);
-                VolumeMap::Point(&point_map)
-            }
-            VolumeEstimate::PhotonBeams => {
-                flights.build(&photons.beams, volume_radius, &beam_bounds);
-                VolumeMap::PhotonBeams(&flights)
-            }
-        };
-        let ctx = GatherContext {
-            scene,
-            map: &map,
-            radius,
-            volume_map,
-            volume_radius,
-            power_unit: sppm::power_unit(scene, settings.photons),
-            k: settings.k,
-            max_depth,
-            rr_depth: settings.rr_depth,
-        };
-        add_pixel_samples(scene, &mut film, seed, iteration, |ray, sampler| {
-            sppm::camera_path(&ctx, ray, sampler)
-        });
-    }
-    film
-}
-
-/// Renders `passes` of a method that needs nothing but camera paths.
-fn camera_passes(
-    scene: &Scene,
-    seed: u64,
-    passes: Range<u64>,
-    radiance: impl Fn(Ray, &mut Sampler) -> Rgb + Sync,
-) -> FilmSum {
-    let mut film = FilmSum::new(scene.width(), scene.height());
-    for pass in passes {
-        add_pixel_samples(scene, &mut film, seed, pass, &radiance);
-    }
-    film
+    let b = buffers;
+    sppm::trace_photons(
+        scene,
+        seed,
+        iteration,
+        settings.photons,
+        max_depth,
+        settings.volume_record(),
+        &mut b.photons,
+    );
+    b.map.build(&b.photons.surface, radius);
+    let volume_map = match settings.volume_estimate {
+        VolumeEstimate::Beam => {
+            b.beam_map.build(&b.photons.volume, volume_radius);
+            VolumeMap::Beam(&b.beam_map)
+        }
+        VolumeEstimate::Point => {
+            b.point_map.build(&b.photons.volume, volume_radius);
+            VolumeMap::Point(&b.point_map)
+        }
+        VolumeEstimate::PhotonBeams => {
+            let beam_bounds = scene
+                .bounds()
+                .grow(scene.camera.to_world.transform_point3a(Vec3A::ZERO));
+            b.flights.build(&b.photons.beams, volume_radius, &beam_bounds);
+            VolumeMap::PhotonBeams(&b.flights)
+        }
+    };
+    let ctx = GatherContext {
+        scene,
+        map: &b.map,
+        radius,
+        volume_map,
+        volume_radius,
+        power_unit: sppm::power_unit(scene, settings.photons),
+        k: settings.k,
+        max_depth,
+        rr_depth: settings.rr_depth,
+    };
+    add_pixel_samples(scene, film, seed, iteration, |ray, sampler| {
+        sppm::camera_path(&ctx, ray, sampler)
+    });
 }
 
 /// Adds one camera sample per pixel of pass `pass` to the film, in parallel; counts one pass.
@@ -252,7 +310,7 @@ pub(crate) fn camera_sample(scene: &Scene, seed: u64, pass: u64, x: u32, y: u32)
 /// Light paths (and camera paths) per parallel task of a particle tracer's or hybrid's pass.
 const LIGHT_PATH_CHUNK: u64 = 1024;
 
-/// Renders `passes` of the particle tracer or the hybrid method, the two whose light paths land
+/// Adds pass `pass` of the particle tracer or the hybrid method, the two whose light paths land
 /// anywhere on the film: every contribution is splatted on its own ([`splat::Splats`]), so the
 /// sums do not depend on the threads.
 ///
@@ -261,14 +319,14 @@ const LIGHT_PATH_CHUNK: u64 = 1024;
 /// spots, beams, the sun) trace no camera rays: those would add exact zeros. For the hybrid
 /// (light paths in [`Share::LightSide`]), pixel i's camera path is the path tracer's, in
 /// [`Share::CameraSide`], and scenes without a specular surface trace no light paths.
-fn light_path_passes(
+fn light_path_pass(
     scene: &Scene,
     settings: &PathSettings,
     light_share: Share,
     seed: u64,
-    passes: Range<u64>,
-) -> FilmSum {
-    let mut film = FilmSum::new(scene.width(), scene.height());
+    pass: u64,
+    film: &mut FilmSum,
+) {
     let (camera, camera_share) = match light_share {
         Share::LightSide => (*settings, Share::CameraSide),
         _ => (
@@ -283,46 +341,43 @@ fn light_path_passes(
     let visible = light_share == Share::LightSide || scene.has_visible_lights();
     // The hybrid's light paths count only from a specular bounce: none without such a surface.
     let light_paths = light_share != Share::LightSide || scene.has_specular_surfaces();
-    for pass in passes {
-        let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(LIGHT_PATH_CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut out = splat::Splats::new();
-                for i in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(pixels) {
-                    if visible {
-                        let (x, y) = ((i % w) as u32, (i / w) as u32);
-                        let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
-                        let at = Vec2::new(x as f32, y as f32) + u_pixel;
-                        out.add(
-                            scene,
-                            at,
-                            path::radiance(scene, &camera, camera_share, ray, &mut sampler),
-                        );
-                    }
-                    if light_paths {
-                        ptracer::trace_light_path(
-                            scene,
-                            settings,
-                            light_share,
-                            seed,
-                            pass,
-                            (pixels, i),
-                            &mut |at, l| out.add(scene, at, l),
-                        );
-                    }
+    let chunks: Vec<splat::Splats> = (0..pixels.div_ceil(LIGHT_PATH_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let mut out = splat::Splats::new();
+            for i in c * LIGHT_PATH_CHUNK..((c + 1) * LIGHT_PATH_CHUNK).min(pixels) {
+                if visible {
+                    let (x, y) = ((i % w) as u32, (i / w) as u32);
+                    let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
+                    let at = Vec2::new(x as f32, y as f32) + u_pixel;
+                    out.add(
+                        scene,
+                        at,
+                        path::radiance(scene, &camera, camera_share, ray, &mut sampler),
+                    );
                 }
-                out
-            })
-            .collect();
-        for c in chunks {
-            film.nonfinite += c.nonfinite;
-            for (p, v) in &c.values {
-                add_fixed(&mut film.sums[*p as usize], v);
+                if light_paths {
+                    ptracer::trace_light_path(
+                        scene,
+                        settings,
+                        light_share,
+                        seed,
+                        pass,
+                        (pixels, i),
+                        &mut |at, l| out.add(scene, at, l),
+                    );
+                }
             }
+            out
+        })
+        .collect();
+    for c in chunks {
+        film.nonfinite += c.nonfinite;
+        for (p, v) in &c.values {
+            add_fixed(&mut film.sums[*p as usize], v);
         }
-        film.passes += 1;
     }
-    film
+    film.passes += 1;
 }
 
 /// Box filter: one sample per pixel, computed in parallel by rows.
@@ -388,12 +443,40 @@ mod tests {
             seed: 9,
             method: Method::Path(PathSettings::from_scene(&scene)),
         };
-        let whole = render_passes(&scene, &settings, 0..6);
-        let mut parts = render_passes(&scene, &settings, 4..6);
-        parts.add(&render_passes(&scene, &settings, 0..1)).unwrap();
-        parts.add(&render_passes(&scene, &settings, 1..4)).unwrap();
+        let whole = Renderer::new(&scene, &settings).passes(0..6);
+        let mut parts = Renderer::new(&scene, &settings).passes(4..6);
+        parts.add(&Renderer::new(&scene, &settings).passes(0..1)).unwrap();
+        parts.add(&Renderer::new(&scene, &settings).passes(1..4)).unwrap();
         assert_eq!(whole, parts);
         assert!(whole.sums.iter().any(|s| s[2] > 0));
+    }
+
+    /// A batch's odd sums are those of its odd passes rendered alone, as the worker sent them
+    /// before the renderer made them; a set stop flag renders nothing; a renderer reused over
+    /// ranges gives what fresh ones give.
+    #[test]
+    fn a_batch_carries_its_odd_passes_and_stops_on_the_flag() {
+        let scene = Scene::from_str(SCENE, Path::new("inline.xml"), &[]).unwrap();
+        let path = PathSettings::from_scene(&scene);
+        for method in [Method::Path(path), Method::Ptracer(path)] {
+            let settings = RenderSettings { seed: 4, method };
+            let mut renderer = Renderer::new(&scene, &settings);
+            let never = AtomicBool::new(false);
+            let batch = renderer.render(2..7, None, &never);
+            let mut odd = OddSums::empty(scene.width(), scene.height());
+            for pass in [3, 5] {
+                odd.add(&OddSums::of(&Renderer::new(&scene, &settings).passes(pass..pass + 1)));
+            }
+            assert_eq!(batch.odd, odd);
+            assert_eq!(batch.odd.passes, 2);
+            assert!(batch.odd.sums.iter().any(|s| *s != [0; 3]));
+            assert_eq!(batch.sum, Renderer::new(&scene, &settings).passes(2..7));
+            // Reused after a batch: the same bytes as a fresh renderer's.
+            assert_eq!(renderer.passes(0..3), Renderer::new(&scene, &settings).passes(0..3));
+            let stopped = renderer.render(0..4, None, &AtomicBool::new(true));
+            assert_eq!((stopped.sum.passes, stopped.odd.passes), (0, 0));
+            assert!(stopped.sum.sums.iter().all(|s| *s == [0; 3]));
+        }
     }
 
     /// Splatted samples (Gaussian, tent), a camera's and a particle tracer's, keep the farm's
@@ -413,9 +496,9 @@ mod tests {
             for method in [Method::Path(path), Method::Ptracer(path), Method::Hybrid(path)] {
                 let settings = RenderSettings { seed: 3, method };
                 let pool = |n| rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
-                let whole = pool(1).install(|| render_passes(&scene, &settings, 0..5));
-                let mut parts = pool(2).install(|| render_passes(&scene, &settings, 2..5));
-                parts.add(&render_passes(&scene, &settings, 0..2)).unwrap();
+                let whole = pool(1).install(|| Renderer::new(&scene, &settings).passes(0..5));
+                let mut parts = pool(2).install(|| Renderer::new(&scene, &settings).passes(2..5));
+                parts.add(&Renderer::new(&scene, &settings).passes(0..2)).unwrap();
                 assert_eq!(whole, parts);
                 if let Method::Path(_) = method {
                     // Every pixel received weight; a box-filtered sum added to it stays

@@ -13,7 +13,7 @@ use photonfarm::color::Rgb;
 use photonfarm::film::{FilmSum, read_image};
 use photonfarm::integrator::sppm::VolumeEstimate;
 use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
-use photonfarm::render::{RenderSettings, render_passes};
+use photonfarm::render::{RenderSettings, Renderer};
 use photonfarm::scene::Scene;
 use plotters::prelude::*;
 
@@ -226,9 +226,10 @@ fn measure(
     let mut next = Duration::from_millis(250).min(budget);
     let mut chunk = 1u64;
     let mut rows = Vec::new();
+    let mut renderer = Renderer::new(scene, settings);
     loop {
         let start = Instant::now();
-        let part = pool.install(|| render_passes(scene, settings, film.passes..film.passes + chunk));
+        let part = pool.install(|| renderer.passes(film.passes..film.passes + chunk));
         render_time += start.elapsed();
         film.add(&part).expect("same scene, same size");
         if render_time >= next || render_time >= budget {

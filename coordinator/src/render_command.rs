@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use photonfarm::film::FilmSum;
-use photonfarm::render::{Method, render_batch};
+use photonfarm::render::{Method, Renderer};
 use photonfarm::scene::Scene;
 
 use crate::accumulator::Accumulator;
@@ -51,8 +51,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         ""
     };
     eprintln!("method: {method}{source}");
-    let (unit, radii_schedule) = match &resolved.render.method {
-        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) | Method::Hybrid(_) => ("passes", None),
+    let unit = match &resolved.render.method {
+        Method::Path(_) | Method::Direct(_) | Method::Ptracer(_) | Method::Hybrid(_) => "passes",
         Method::Sppm(s) => {
             eprintln!(
                 "SPPM: {} photons per iteration, initial radius {:.4e} (volume {:.4e}), alpha {:.3}, k {}",
@@ -62,7 +62,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
                 s.alpha,
                 s.k
             );
-            ("iterations", Some(*s))
+            "iterations"
         }
     };
     let threads = args
@@ -134,6 +134,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let mut checkpoint_error = None;
     let now = || start.elapsed().as_millis() as u64;
     let interrupted = interruption_flag();
+    let mut renderer = Renderer::new(&scene, &resolved.render);
     loop {
         let stop = interrupted.load(std::sync::atomic::Ordering::Relaxed);
         if stop || limit.is_some_and(|l| start.elapsed() >= l) {
@@ -142,11 +143,15 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         let Some(grant) = scheduler.lease("local", now()) else {
             break;
         };
-        let radii = radii_schedule
-            .map(|s| s.radii(grant.start..grant.end))
-            .unwrap_or_default();
-        let sum = pool.install(|| render_batch(&scene, &resolved.render, grant.start..grant.end, &radii));
-        scheduler.complete(grant.lease_id, now())?;
+        // SPPM's radii from the settings' schedule, as the coordinator sends them to workers.
+        let sum = pool.install(|| renderer.render(grant.start..grant.end, None, &interrupted).sum);
+        if sum.passes == 0 {
+            // Interrupted before the batch's first pass; the loop closes the job.
+            continue;
+        }
+        if sum.passes == grant.end - grant.start {
+            scheduler.complete(grant.lease_id, now())?;
+        }
         let checkpoints = acc.add(grant.start, sum, None)?.checkpoints;
         if (saved.elapsed() >= save_every || !checkpoints.is_empty()) && save_error.is_none() {
             // Keep rendering if this fails: the image may still be written.
@@ -238,7 +243,7 @@ fn interruption_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
             return;
         };
         rt.block_on(photonfarm::process::shutdown_signal());
-        eprintln!("\ninterrupted: finishing the batch under way, then writing the image");
+        eprintln!("\ninterrupted: finishing the pass under way, then writing the image");
         set.store(true, std::sync::atomic::Ordering::Relaxed);
     });
     flag

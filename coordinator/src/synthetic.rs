@@ -11,7 +11,7 @@ use photonfarm::film::{FIXED_SCALE, FilmSum};
 use photonfarm::integrator::path::PathSettings;
 use photonfarm::parity::{OddSums, sample_indices};
 use photonfarm::protocol::encode_result;
-use photonfarm::render::{Method, RenderSettings, render_batch};
+use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::scene::Scene;
 
 /// A rendered image's per-pass mean and spread, from which results of any pass count are made.
@@ -54,8 +54,8 @@ impl Synthetic {
                 rr_depth: 5,
             }),
         };
-        let a = render_batch(scene, &settings, 0..1, &[]);
-        let b = render_batch(scene, &settings, 1..2, &[]);
+        let mut renderer = Renderer::new(scene, &settings);
+        let (a, b) = (renderer.passes(0..1), renderer.passes(1..2));
         let (mean, sigma) = a
             .sums
             .iter()

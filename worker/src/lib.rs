@@ -19,11 +19,9 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use photonfarm::bundle::UnpackLimits;
 use photonfarm::compression::{self, Encoding};
-use photonfarm::film::FilmSum;
 use photonfarm::limits::Limits;
-use photonfarm::parity::OddSums;
 use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encode_result};
-use photonfarm::render::render_batch;
+use photonfarm::render::Renderer;
 use photonfarm::scene::Scene;
 use tokio::sync::watch;
 
@@ -322,27 +320,12 @@ async fn work_on(
     let (pool, lost_r, lease_r) = (pool.clone(), lost.clone(), lease.clone());
     let sum = tokio::task::spawn_blocking(move || {
         pool.install(|| {
-            // Pass by pass, so a lost lease stops the work early; the sum is the same bytes as
-            // one call over the whole range. The odd passes are also summed on the sampled
-            // pixels, for the coordinator's noise estimate (photonfarm::parity).
-            let mut sum = FilmSum::new(scene.width(), scene.height());
-            let mut odd = OddSums::empty(scene.width(), scene.height());
-            for (k, pass) in (lease_r.start..lease_r.end).enumerate() {
-                if lost_r.load(Ordering::Relaxed) {
-                    return None;
-                }
-                let radii = if lease_r.radii.is_empty() {
-                    &[][..]
-                } else {
-                    &lease_r.radii[k..k + 1]
-                };
-                let part = render_batch(&scene, &lease_r.settings, pass..pass + 1, radii);
-                sum.add(&part).expect("same scene, same size");
-                if pass % 2 == 1 {
-                    odd.add(&OddSums::of(&part));
-                }
-            }
-            Some((sum, odd))
+            // A lost lease stops the work before its next pass. The odd passes are also summed
+            // on the sampled pixels, for the coordinator's noise estimate (photonfarm::parity).
+            let radii = (!lease_r.radii.is_empty()).then_some(&lease_r.radii[..]);
+            let batch =
+                Renderer::new(&scene, &lease_r.settings).render(lease_r.start..lease_r.end, radii, &lost_r);
+            (batch.sum.passes == lease_r.end - lease_r.start).then_some((batch.sum, batch.odd))
         })
     })
     .await

@@ -691,7 +691,7 @@ mod tests {
     use std::path::Path;
 
     use super::*;
-    use crate::render::{Method, RenderSettings, render_passes_on};
+    use crate::render::{Method, RenderSettings, Renderer};
 
     fn load(name: &str, res: u32) -> Scene {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -815,7 +815,10 @@ mod tests {
                 seed: 7,
                 method: Method::Path(PathSettings::from_scene(&scene)),
             };
-            let scalar = render_passes_on(&scene, &settings, 0..2, None).image().unwrap();
+            let scalar = Renderer::on(&scene, &settings, None)
+                .passes(0..2)
+                .image()
+                .unwrap();
             let ours = lanes(&scene, Backend::best(), 0..2).image().unwrap();
             let sum = |c: &Rgb| c.to_array().iter().sum::<f32>() as f64;
             let total: f64 = scalar.iter().map(sum).sum();

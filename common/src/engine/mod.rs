@@ -5,7 +5,7 @@
 //! lit by area lights (the Cornell box) on the lane types ([`lanes`]) and our own
 //! transcendentals ([`math`]), so that the design's speed can be measured before every
 //! integrator is converted (`cargo bench -p photonfarm-common --bench engine`). The path
-//! tracer hands it the scenes it models (`render::render_passes_on`).
+//! tracer hands it the scenes it models (`render::Renderer`).
 
 pub mod diffuse_path;
 pub mod lanes;
