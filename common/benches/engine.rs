@@ -174,7 +174,10 @@ fn race(name: &str, scene: &Scene, backends: &[Backend]) {
     println!("{name}, 256², 1 thread, medians of {RUNS} runs of {PASSES} passes");
     println!("{:<24} {:>8.3} M samples/s", "scalar path tracer", scalar);
     let pass_ms = (scene.width() * scene.height()) as f64 / median(rates[1].clone()) / 1e3;
-    println!("lane scene made in {build:.2} ms; a pass on {} takes {pass_ms:.1} ms", backends[0]);
+    println!(
+        "lane scene made in {build:.2} ms; a pass on {} takes {pass_ms:.1} ms",
+        backends[0]
+    );
     for (k, b) in backends.iter().enumerate() {
         let m = median(rates[k + 1].clone());
         println!(

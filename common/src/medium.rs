@@ -48,7 +48,8 @@ impl Phase {
         };
         let sin = (1.0 - cos * cos).max(0.0).sqrt();
         let phi = 2.0 * PI * u.y;
-        let d = Frame::from_normal(d_in).to_world(Vec3A::new(sin * phi.cos(), sin * phi.sin(), cos));
+        let (sin_phi, cos_phi) = libm::sincosf(phi);
+        let d = Frame::from_normal(d_in).to_world(Vec3A::new(sin * cos_phi, sin * sin_phi, cos));
         (d, self.eval(d_in, d))
     }
 }
@@ -98,7 +99,7 @@ impl Medium {
         let c = ((u_channel * 3.0) as usize).min(2);
         let s = self.sigma_t[c];
         let t = if s > 0.0 {
-            -(1.0 - u).ln() / s
+            -libm::logf(1.0 - u) / s
         } else {
             f32::INFINITY
         };
@@ -138,9 +139,9 @@ impl Medium {
             if x < 0.1 {
                 // (1 − e^−x)/x by its series, to 4e-5 relative: one exp less, and no division
                 // by s = 0.
-                (-s * a).exp() * len * (1.0 - x * (0.5 - x * (1.0 / 6.0)))
+                libm::expf(-s * a) * len * (1.0 - x * (0.5 - x * (1.0 / 6.0)))
             } else {
-                (-s * a).exp() * -(-s * len).exp_m1() / s
+                libm::expf(-s * a) * -libm::expm1f(-s * len) / s
             }
         };
         Rgb::new(one(self.sigma_t.x), one(self.sigma_t.y), one(self.sigma_t.z))
@@ -158,10 +159,10 @@ impl Medium {
             return None;
         }
         // Probability of colliding before t_max in each channel, without cancellation.
-        let reach = sigma.map(|s| if s > 0.0 { -(-s * t_max).exp_m1() } else { 0.0 });
+        let reach = sigma.map(|s| if s > 0.0 { -libm::expm1f(-s * t_max) } else { 0.0 });
         let pick = ((u_channel * n as f32) as usize).min(n - 1);
         let c = (0..3).filter(|&c| sigma[c] > 0.0).nth(pick)?;
-        let t = (-(-u * reach[c]).ln_1p() / sigma[c]).min(t_max.next_down());
+        let t = (-libm::log1pf(-u * reach[c]) / sigma[c]).min(t_max.next_down());
         let tr = self.transmittance(t);
         let pdf: f32 = (0..3)
             .filter(|&c| sigma[c] > 0.0)
@@ -236,7 +237,7 @@ mod tests {
                 if sg == 0.0 {
                     0.0
                 } else {
-                    (1.0 - (-sg * t_max).exp() * (1.0 + sg * t_max.min(1e30))) / sg
+                    (1.0 - libm::expf(-sg * t_max) * (1.0 + sg * t_max.min(1e30))) / sg
                 }
             };
             let expect = Rgb::new(expect(0.0), expect(1.0), expect(3.0));
@@ -251,7 +252,7 @@ mod tests {
             if sg == 0.0 {
                 0.7
             } else {
-                ((-sg * 0.2f32).exp() - (-sg * 0.9f32).exp()) / sg
+                (libm::expf(-sg * 0.2f32) - libm::expf(-sg * 0.9f32)) / sg
             }
         };
         assert!(

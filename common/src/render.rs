@@ -465,14 +465,19 @@ mod tests {
             let batch = renderer.render(2..7, None, &never);
             let mut odd = OddSums::empty(scene.width(), scene.height());
             for pass in [3, 5] {
-                odd.add(&OddSums::of(&Renderer::new(&scene, &settings).passes(pass..pass + 1)));
+                odd.add(&OddSums::of(
+                    &Renderer::new(&scene, &settings).passes(pass..pass + 1),
+                ));
             }
             assert_eq!(batch.odd, odd);
             assert_eq!(batch.odd.passes, 2);
             assert!(batch.odd.sums.iter().any(|s| *s != [0; 3]));
             assert_eq!(batch.sum, Renderer::new(&scene, &settings).passes(2..7));
             // Reused after a batch: the same bytes as a fresh renderer's.
-            assert_eq!(renderer.passes(0..3), Renderer::new(&scene, &settings).passes(0..3));
+            assert_eq!(
+                renderer.passes(0..3),
+                Renderer::new(&scene, &settings).passes(0..3)
+            );
             let stopped = renderer.render(0..4, None, &AtomicBool::new(true));
             assert_eq!((stopped.sum.passes, stopped.odd.passes), (0, 0));
             assert!(stopped.sum.sums.iter().all(|s| *s == [0; 3]));

@@ -155,7 +155,8 @@ pub fn square_to_uniform_disk_concentric(u: Vec2) -> Vec2 {
     } else {
         (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
     };
-    Vec2::new(r * theta.cos(), r * theta.sin())
+    let (sin_theta, cos_theta) = libm::sincosf(theta);
+    Vec2::new(r * cos_theta, r * sin_theta)
 }
 
 /// Uniform direction on the unit sphere.
@@ -163,7 +164,8 @@ pub fn square_to_uniform_sphere(u: Vec2) -> Vec3A {
     let z = 1.0 - 2.0 * u.x;
     let r = (1.0 - z * z).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;
-    Vec3A::new(r * phi.cos(), r * phi.sin(), z)
+    let (sin_phi, cos_phi) = libm::sincosf(phi);
+    Vec3A::new(r * cos_phi, r * sin_phi, z)
 }
 
 /// Uniform direction in the cone around +z with the given cosine of its half-angle.
@@ -171,7 +173,8 @@ pub fn square_to_uniform_cone(u: Vec2, cos_cutoff: f32) -> Vec3A {
     let cos_theta = 1.0 - u.x * (1.0 - cos_cutoff);
     let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;
-    Vec3A::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta)
+    let (sin_phi, cos_phi) = libm::sincosf(phi);
+    Vec3A::new(sin_theta * cos_phi, sin_theta * sin_phi, cos_theta)
 }
 
 /// Density of [`square_to_uniform_cone`] per unit solid angle.
@@ -195,9 +198,9 @@ pub fn sample_equiangular(delta: f32, h: f32, t_max: f32, u: f32) -> Option<(f32
     if h.is_nan() || h <= 1e-7 || t_max.is_nan() || t_max <= 0.0 {
         return None;
     }
-    let theta_a = (-delta / h).atan();
+    let theta_a = libm::atanf(-delta / h);
     let theta_b = if t_max.is_finite() {
-        ((t_max - delta) / h).atan()
+        libm::atanf((t_max - delta) / h)
     } else {
         FRAC_PI_2
     };
@@ -205,7 +208,7 @@ pub fn sample_equiangular(delta: f32, h: f32, t_max: f32, u: f32) -> Option<(f32
     if span.is_nan() || span <= 0.0 {
         return None;
     }
-    let x = h * (theta_a + u * span).tan();
+    let x = h * libm::tanf(theta_a + u * span);
     let t = (delta + x).clamp(0.0, t_max.next_down());
     Some((t, h / (span * (h * h + x * x))))
 }
@@ -320,9 +323,9 @@ mod tests {
                 let (t, pdf) = sample_equiangular(delta, h, t_max, s.next_1d()).unwrap();
                 assert!((0.0..t_max).contains(&t));
                 len += 1.0 / pdf as f64;
-                expo += (-t as f64).exp() / pdf as f64;
+                expo += libm::exp(-t as f64) / pdf as f64;
             }
-            let expect_expo = 1.0 - (-t_max as f64).exp();
+            let expect_expo = 1.0 - libm::exp(-t_max as f64);
             assert!(
                 (expo / n as f64 / expect_expo - 1.0).abs() < 0.01,
                 "{delta} {h} {t_max}: {}",

@@ -17,11 +17,11 @@ fn write_bumpy_sphere(path: &Path, rings: u32, segments: u32) -> usize {
         let theta = std::f32::consts::PI * i as f32 / rings as f32;
         for j in 0..segments {
             let phi = 2.0 * std::f32::consts::PI * j as f32 / segments as f32;
-            let r = 0.45 * (1.0 + 0.06 * (13.0 * theta).sin() * (17.0 * phi).sin());
+            let r = 0.45 * (1.0 + 0.06 * libm::sinf(13.0 * theta) * libm::sinf(17.0 * phi));
             verts.push([
-                r * theta.sin() * phi.cos(),
-                -0.5 + r * theta.cos(),
-                r * theta.sin() * phi.sin(),
+                r * libm::sinf(theta) * libm::cosf(phi),
+                -0.5 + r * libm::cosf(theta),
+                r * libm::sinf(theta) * libm::sinf(phi),
             ]);
         }
     }

@@ -53,7 +53,7 @@ impl Microfacet {
         let a2 = self.alpha * self.alpha;
         let c2 = m.z * m.z;
         let d = match self.distribution {
-            Distribution::Beckmann => (-(m.x * m.x + m.y * m.y) / (a2 * c2)).exp() / (PI * a2 * c2 * c2),
+            Distribution::Beckmann => libm::expf(-(m.x * m.x + m.y * m.y) / (a2 * c2)) / (PI * a2 * c2 * c2),
             Distribution::Ggx => {
                 let denom = c2 * (a2 - 1.0) + 1.0;
                 a2 / (PI * denom * denom)
@@ -112,7 +112,8 @@ impl Microfacet {
     /// inversion of the visible-slope distribution (three Newton steps), rotate and unstretch,
     /// as Mitsuba does. In f64: the inversion works near erf's flat ends.
     fn sample_visible_beckmann(&self, wi: Vec3A, u: Vec2) -> Vec3A {
-        use statrs::function::erf::{erf, erf_inv};
+        use libm::erf;
+        use statrs::function::erf::erf_inv;
         let a = self.alpha as f64;
         let (wx, wy, wz) = (a * wi.x as f64, a * wi.y as f64, wi.z as f64);
         let len = (wx * wx + wy * wy + wz * wz).sqrt();
@@ -131,15 +132,15 @@ impl Microfacet {
         let inv_sqrt_pi = 1.0 / std::f64::consts::PI.sqrt();
         let max_val = erf(cot_theta);
         let tail = if tan_theta > 0.0 {
-            inv_sqrt_pi * tan_theta * (-cot_theta * cot_theta).exp()
+            inv_sqrt_pi * tan_theta * libm::exp(-cot_theta * cot_theta)
         } else {
             0.0
         };
-        let mut x = max_val - (max_val + 1.0) * erf((-ux.ln()).sqrt());
+        let mut x = max_val - (max_val + 1.0) * erf((-libm::log(ux)).sqrt());
         let target = ux * (1.0 + max_val + tail);
         for _ in 0..3 {
             let slope = erf_inv(x.clamp(-1.0 + 1e-12, 1.0 - 1e-12));
-            let value = 1.0 + x + inv_sqrt_pi * tan_theta * (-slope * slope).exp() - target;
+            let value = 1.0 + x + inv_sqrt_pi * tan_theta * libm::exp(-slope * slope) - target;
             let deriv = 1.0 - slope * tan_theta;
             x -= value / deriv;
         }
@@ -211,9 +212,10 @@ impl AnisotropicGgx {
         let t2 = vh.cross(t1);
         let r = u.x.sqrt();
         let phi = 2.0 * PI * u.y;
-        let p1 = r * phi.cos();
+        let (sin_phi, cos_phi) = libm::sincosf(phi);
+        let p1 = r * cos_phi;
         let s = 0.5 * (1.0 + vh.z);
-        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * phi.sin();
+        let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * r * sin_phi;
         let nh = p1 * t1 + p2 * t2 + (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt() * vh;
         Vec3A::new(au * nh.x, av * nh.y, nh.z.max(1e-7)).normalize()
     }

@@ -138,7 +138,7 @@ impl Gtr1 {
     fn d(&self, m: Vec3A) -> f32 {
         let a2 = self.alpha * self.alpha;
         let c2 = m.z * m.z;
-        let d = (a2 - 1.0) / (PI * a2.ln() * (1.0 + (a2 - 1.0) * c2));
+        let d = (a2 - 1.0) / (PI * libm::logf(a2) * (1.0 + (a2 - 1.0) * c2));
         if d * m.z > 1e-20 { d } else { 0.0 }
     }
 
@@ -149,10 +149,11 @@ impl Gtr1 {
     fn sample(&self, u: Vec2) -> Vec3A {
         let phi = 2.0 * PI * u.x;
         let a2 = self.alpha * self.alpha;
-        let cos2 = (1.0 - a2.powf(1.0 - u.y)) / (1.0 - a2);
+        let cos2 = (1.0 - libm::powf(a2, 1.0 - u.y)) / (1.0 - a2);
         let sin = (1.0 - cos2).max(0.0).sqrt();
         let cos = cos2.max(0.0).sqrt();
-        Vec3A::new(phi.cos() * sin, phi.sin() * sin, cos)
+        let (sin_phi, cos_phi) = libm::sincosf(phi);
+        Vec3A::new(cos_phi * sin, sin_phi * sin, cos)
     }
 }
 

@@ -293,7 +293,7 @@ const PHI_BINS: usize = 20;
 
 fn bin_of(w: Vec3A) -> usize {
     let t = (((w.z.clamp(-1.0, 1.0) + 1.0) * 0.5 * THETA_BINS as f32) as usize).min(THETA_BINS - 1);
-    let phi = w.y.atan2(w.x) + PI;
+    let phi = libm::atan2f(w.y, w.x) + PI;
     let p = ((phi / (2.0 * PI) * PHI_BINS as f32) as usize).min(PHI_BINS - 1);
     t * PHI_BINS + p
 }
@@ -311,7 +311,7 @@ fn expected_probabilities(b: &Bsdf, wi: Vec3A) -> Vec<f64> {
                     let z = -1.0 + (t as f32 + (i as f32 + 0.5) / sub as f32) * dz;
                     let phi = (p as f32 + (j as f32 + 0.5) / sub as f32) * dphi - PI;
                     let s = (1.0 - z * z).max(0.0).sqrt();
-                    let wo = Vec3A::new(s * phi.cos(), s * phi.sin(), z);
+                    let wo = Vec3A::new(s * libm::cosf(phi), s * libm::sinf(phi), z);
                     sum += b.pdf(&UV, wi, wo) as f64;
                 }
             }

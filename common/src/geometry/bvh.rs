@@ -568,7 +568,7 @@ mod tests {
     /// SAH can only peel one sphere off per level: unbounded, the tree is as deep as there
     /// are spheres.
     fn progression(n: usize) -> Vec<Primitive> {
-        let step = 17f32.powf(1.0 / 3.0);
+        let step = libm::powf(17f32, 1.0 / 3.0);
         (0..n)
             .map(|i| {
                 let l = step.powi(-(i as i32));

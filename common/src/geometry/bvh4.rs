@@ -306,7 +306,7 @@ mod tests {
                 assert_eq!(wide[0].used.count_ones(), 4);
             }
             // Four children per node: at most half as many levels as the binary tree's.
-            let binary_depth = (n as f32 / 2.0).log2().ceil() as usize;
+            let binary_depth = libm::log2f(n as f32 / 2.0).ceil() as usize;
             assert!(
                 depth(&wide, 0) <= binary_depth.div_ceil(2),
                 "{n}: {}",

@@ -75,13 +75,13 @@ impl Sphere {
         // Mitsuba's parameterisation: u the longitude about the local z axis from +x, v the
         // colatitude from +z.
         let l = self.rotation.inverse() * glam::Vec3::from(n);
-        let mut phi = l.y.atan2(l.x);
+        let mut phi = libm::atan2f(l.y, l.x);
         if phi < 0.0 {
             phi += 2.0 * std::f32::consts::PI;
         }
         let uv = Vec2::new(
             phi * std::f32::consts::FRAC_1_PI * 0.5,
-            l.z.clamp(-1.0, 1.0).acos() * std::f32::consts::FRAC_1_PI,
+            libm::acosf(l.z.clamp(-1.0, 1.0)) * std::f32::consts::FRAC_1_PI,
         );
         // Mitsuba's ∂p/∂u and ∂p/∂v (sphere.cpp): 2π r (−y, x, 0) and π r (z cos φ, z sin φ,
         // −sin θ) in the sphere's frame, ∂p/∂v along x at the poles.

@@ -90,8 +90,8 @@ impl AreaLight {
                 let cos = 1.0 - u.x * one_minus_cos;
                 let sin = (1.0 - cos * cos).max(0.0).sqrt();
                 let phi = 2.0 * PI * u.y;
-                let dir =
-                    Frame::from_normal(axis).to_world(Vec3A::new(sin * phi.cos(), sin * phi.sin(), cos));
+                let (sin_phi, cos_phi) = libm::sincosf(phi);
+                let dir = Frame::from_normal(axis).to_world(Vec3A::new(sin * cos_phi, sin * sin_phi, cos));
                 let r2 = sphere.radius * sphere.radius;
                 let t = dc * cos - (r2 - dc * dc * sin * sin).max(0.0).sqrt();
                 sphere.surface(p + dir * t)

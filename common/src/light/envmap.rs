@@ -31,14 +31,14 @@ pub struct EnvmapLight {
 
 /// Mitsuba's mapping of (u, v) to a local direction: +y up, u = 0 towards −z, then +x.
 fn uv_to_direction(uv: Vec2) -> Vec3A {
-    let (sin_t, cos_t) = (PI * uv.y).sin_cos();
-    let (sin_p, cos_p) = (2.0 * PI * uv.x).sin_cos();
+    let (sin_t, cos_t) = libm::sincosf(PI * uv.y);
+    let (sin_p, cos_p) = libm::sincosf(2.0 * PI * uv.x);
     Vec3A::new(sin_p * sin_t, cos_t, -cos_p * sin_t)
 }
 
 fn direction_to_uv(d: Vec3A) -> Vec2 {
-    let u = d.x.atan2(-d.z) * (0.5 / PI);
-    Vec2::new(u - u.floor(), d.y.clamp(-1.0, 1.0).acos() / PI)
+    let u = libm::atan2f(d.x, -d.z) * (0.5 / PI);
+    Vec2::new(u - u.floor(), libm::acosf(d.y.clamp(-1.0, 1.0)) / PI)
 }
 
 impl EnvmapLight {
@@ -66,7 +66,7 @@ impl EnvmapLight {
         let mut cols = Vec::with_capacity(height - 1);
         let mut integral = 0.0f64;
         for j in 0..height - 1 {
-            let sin = (PI * (j as f32 + 0.5) / (height - 1) as f32).sin();
+            let sin = libm::sinf(PI * (j as f32 + 0.5) / (height - 1) as f32);
             let w: Vec<f32> = (0..width)
                 .map(|i| 0.25 * (lum(i, j) + lum(i + 1, j) + lum(i, j + 1) + lum(i + 1, j + 1)) * sin)
                 .collect();
@@ -138,7 +138,7 @@ impl EnvmapLight {
             ((x + 0.5) / self.width as f32).fract(),
             y / (self.height - 1) as f32,
         );
-        let sin = (PI * uv.y).sin();
+        let sin = libm::sinf(PI * uv.y);
         if sin <= 0.0 {
             return None;
         }
@@ -212,7 +212,7 @@ mod tests {
             for b in 0..nv {
                 let uv = Vec2::new((a as f32 + 0.5) / nu as f32, (b as f32 + 0.5) / nv as f32);
                 let d = m.to_world * uv_to_direction(uv);
-                let dw = 2.0 * PI * PI * (PI * uv.y).sin() / (nu * nv) as f32;
+                let dw = 2.0 * PI * PI * libm::sinf(PI * uv.y) / (nu * nv) as f32;
                 quad += m.eval(d) * dw;
                 pdf_sum += (m.pdf(d) * dw) as f64;
             }

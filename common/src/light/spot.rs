@@ -26,12 +26,13 @@ impl SpotLight {
     /// Fraction of the central intensity emitted along local direction `d`.
     pub fn falloff(&self, d: Vec3A) -> f32 {
         let cos = d.normalize_or_zero().z;
-        if cos <= self.cutoff.cos() {
+        if cos <= libm::cosf(self.cutoff) {
             0.0
-        } else if cos >= self.beam_width.cos() {
+        } else if cos >= libm::cosf(self.beam_width) {
             1.0
         } else {
-            ((self.cutoff - cos.clamp(-1.0, 1.0).acos()) / (self.cutoff - self.beam_width)).clamp(0.0, 1.0)
+            ((self.cutoff - libm::acosf(cos.clamp(-1.0, 1.0))) / (self.cutoff - self.beam_width))
+                .clamp(0.0, 1.0)
         }
     }
 
@@ -56,7 +57,7 @@ impl SpotLight {
 
     /// A direction uniform in the cutoff cone, weighted by the falloff.
     pub(super) fn sample_emission(&self, u: glam::Vec2) -> Option<EmittedPhoton> {
-        let cos_cutoff = self.cutoff.cos();
+        let cos_cutoff = libm::cosf(self.cutoff);
         let local = square_to_uniform_cone(u, cos_cutoff);
         let falloff = self.falloff(local);
         (falloff > 0.0).then(|| EmittedPhoton {
@@ -74,8 +75,9 @@ impl SpotLight {
         let mut sum = 0.0;
         for i in 0..n {
             let theta = (i as f32 + 0.5) / n as f32 * self.cutoff;
-            let d = Vec3A::new(theta.sin(), 0.0, theta.cos());
-            sum += self.falloff(d) * theta.sin() * self.cutoff / n as f32;
+            let (sin_theta, cos_theta) = libm::sincosf(theta);
+            let d = Vec3A::new(sin_theta, 0.0, cos_theta);
+            sum += self.falloff(d) * sin_theta * self.cutoff / n as f32;
         }
         2.0 * PI * sum * luminance(self.intensity)
     }

@@ -56,7 +56,7 @@ impl Mesh {
                     (v[(j + 1) % 3] - v[j]).normalize(),
                     (v[(j + 2) % 3] - v[j]).normalize(),
                 );
-                normals[t[j] as usize] += n * a.dot(b).clamp(-1.0, 1.0).acos();
+                normals[t[j] as usize] += n * libm::acosf(a.dot(b).clamp(-1.0, 1.0));
             }
         }
         for n in &mut normals {
@@ -167,13 +167,14 @@ fn cube_uv(axis: usize, sign: f32, p: Vec3A) -> Vec2 {
 /// so that the angle does not jump inside the last one.
 pub(crate) fn disk() -> Mesh {
     const SEGMENTS: u32 = 256;
-    let polygon_area = 0.5 * SEGMENTS as f32 * (2.0 * PI / SEGMENTS as f32).sin();
+    let polygon_area = 0.5 * SEGMENTS as f32 * libm::sinf(2.0 * PI / SEGMENTS as f32);
     let r = (PI / polygon_area).sqrt();
     let mut mesh = Mesh::default();
     let mut uvs = Vec::new();
     let rim = |i: u32| {
         let phi = 2.0 * PI * (i % SEGMENTS) as f32 / SEGMENTS as f32;
-        Vec3A::new(r * phi.cos(), r * phi.sin(), 0.0)
+        let (sin_phi, cos_phi) = libm::sincosf(phi);
+        Vec3A::new(r * cos_phi, r * sin_phi, 0.0)
     };
     for i in 0..SEGMENTS {
         let (t0, t1) = (i as f32 / SEGMENTS as f32, (i + 1) as f32 / SEGMENTS as f32);

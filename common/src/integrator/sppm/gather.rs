@@ -219,13 +219,13 @@ fn beam_estimate(ctx: &GatherContext, ray: &Ray, m: u32, t_max: f32, sampler: &m
     let u_cut = sampler.next_1d();
     let survival = |t: f32| {
         if sigma_min > 0.0 {
-            ((-sigma_min * t).exp() / BEAM_ROULETTE_BELOW).min(1.0)
+            (libm::expf(-sigma_min * t) / BEAM_ROULETTE_BELOW).min(1.0)
         } else {
             1.0
         }
     };
     let t_cut = if sigma_min > 0.0 {
-        -(u_cut * BEAM_ROULETTE_BELOW).ln() / sigma_min
+        -libm::logf(u_cut * BEAM_ROULETTE_BELOW) / sigma_min
     } else {
         f32::INFINITY
     };
@@ -314,8 +314,9 @@ mod tests {
         };
         let ray = Ray::new(Vec3A::new(0.0, 0.0, 5.0), Vec3A::new(0.0, 0.0, -1.0));
         let (sigma_t, albedo, e) = (0.3f64, 0.8f64, 10.0f64);
-        let integral = ((-sigma_t * 4.8).exp() - (-sigma_t * 5.2).exp()) / sigma_t;
-        let expect = e * albedo * sigma_t / (4.0 * std::f64::consts::PI) * (-sigma_t * 5.0).exp() * integral;
+        let integral = (libm::exp(-sigma_t * 4.8) - libm::exp(-sigma_t * 5.2)) / sigma_t;
+        let expect =
+            e * albedo * sigma_t / (4.0 * std::f64::consts::PI) * libm::exp(-sigma_t * 5.0) * integral;
         let n = 4096;
         let (mut sum, mut sum2, mut lit) = (0.0f64, 0.0f64, 0);
         for i in 0..n {

@@ -80,7 +80,7 @@ impl Builder<'_> {
                 // Mitsuba measures a focal length against the diagonal of 35 mm film (36 x 24 mm).
                 let diagonal = (36.0f64 * 36.0 + 24.0 * 24.0).sqrt();
                 (
-                    (2.0 * (diagonal / (2.0 * mm as f64)).atan().to_degrees()) as f32,
+                    (2.0 * libm::atan(diagonal / (2.0 * mm as f64)).to_degrees()) as f32,
                     "diagonal",
                 )
             }
@@ -108,7 +108,7 @@ impl Builder<'_> {
 
         // Mitsuba converts every fov_axis to the x axis's field of view.
         let aspect = width as f64 / height as f64;
-        let tan_half = ((fov as f64).to_radians() * 0.5).tan();
+        let tan_half = libm::tan((fov as f64).to_radians() * 0.5);
         let tan_half_x = match fov_axis {
             "x" => tan_half,
             "y" => tan_half * aspect,
