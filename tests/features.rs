@@ -106,3 +106,11 @@ fn meshes_and_transforms_match_mitsuba() {
 fn rough_glass_thin_glass_and_mask_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("rough-glass");
 }
+
+/// `anisotropic.xml`: `alpha_u` and `alpha_v` apart on a GGX rough conductor, a Beckmann rough
+/// dielectric and a Beckmann rough conductor, so the highlights stretch along the spheres'
+/// ∂p/∂u as in Mitsuba.
+#[test]
+fn anisotropic_roughness_matches_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("anisotropic");
+}

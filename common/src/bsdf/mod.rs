@@ -16,7 +16,7 @@ mod thin_dielectric;
 pub use conductor::Conductor;
 pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
-pub use microfacet::{AnisotropicGgx, Distribution, Microfacet, Roughness};
+pub use microfacet::{Distribution, Microfacet, Roughness};
 pub use perturbed::{Perturbation, Perturbed};
 pub use plastic::Plastic;
 pub use principled::{Principled, eta_from_specular};
@@ -295,6 +295,8 @@ impl Bsdf {
     pub fn needs_tangent_frame(&self) -> bool {
         match self {
             Bsdf::Principled(b) => b.is_anisotropic(),
+            Bsdf::Conductor(c) => c.roughness.as_ref().is_some_and(|r| r.anisotropic),
+            Bsdf::RoughDielectric(d) => d.roughness.anisotropic,
             Bsdf::Perturbed(_) => true,
             Bsdf::Blend(pair, _) | Bsdf::TwoSided(pair) => {
                 pair.0.needs_tangent_frame() || pair.1.needs_tangent_frame()

@@ -13,7 +13,7 @@ use std::f32::consts::{FRAC_1_PI, PI};
 use glam::{Vec2, Vec3A};
 
 use super::fresnel::{fresnel_dielectric, reflect_about};
-use super::microfacet::AnisotropicGgx;
+use super::microfacet::{Distribution, Microfacet};
 use super::{BsdfSample, TransportMode};
 use crate::color::{Rgb, luminance};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
@@ -62,7 +62,7 @@ struct At {
     metallic: f32,
     spec_trans: f32,
     clearcoat: f32,
-    dist: AnisotropicGgx,
+    dist: Microfacet,
 }
 
 impl At {
@@ -189,7 +189,8 @@ impl Principled {
         // Mitsuba's calc_dist_params.
         let r2 = roughness * roughness;
         let aspect = (1.0 - 0.9 * anisotropic).sqrt();
-        let dist = AnisotropicGgx {
+        let dist = Microfacet {
+            distribution: Distribution::Ggx,
             alpha_u: (r2 / aspect).max(0.001),
             alpha_v: (r2 * aspect).max(0.001),
         };

@@ -17,10 +17,7 @@ fn conductor_with(distribution: Distribution, alpha: Option<f32>) -> Bsdf {
         eta: Rgb::new(0.143036, 0.375307, 1.442045),
         k: Rgb::new(3.982997, 2.385556, 1.603359),
         specular: Rgb::ONE.into(),
-        roughness: alpha.map(|alpha| Roughness {
-            distribution,
-            alpha: alpha.into(),
-        }),
+        roughness: alpha.map(|alpha| Roughness::isotropic(distribution, alpha.into())),
     })
 }
 
@@ -34,7 +31,7 @@ fn plastic_with(distribution: Distribution, alpha: Option<f32>, diffuse: f32) ->
         Rgb::ONE.into(),
         1.49,
         false,
-        alpha.map(|alpha| Microfacet { distribution, alpha }),
+        alpha.map(|alpha| Microfacet::isotropic(distribution, alpha)),
     )))
 }
 
@@ -56,10 +53,10 @@ fn textured_conductor() -> Bsdf {
     let Bsdf::Conductor(mut c) = conductor(Some(0.1)) else {
         unreachable!()
     };
-    c.roughness = Some(Roughness {
-        distribution: Distribution::Ggx,
-        alpha: Param::Textured(std::sync::Arc::new(Texture::Bitmap(bitmap))),
-    });
+    c.roughness = Some(Roughness::isotropic(
+        Distribution::Ggx,
+        Param::Textured(std::sync::Arc::new(Texture::Bitmap(bitmap))),
+    ));
     Bsdf::Conductor(c)
 }
 
@@ -72,10 +69,7 @@ fn diffuse(r: f32) -> Bsdf {
 fn rough_glass(distribution: Distribution, alpha: f32) -> Bsdf {
     Bsdf::RoughDielectric(Box::new(RoughDielectric {
         eta: 1.5,
-        roughness: Roughness {
-            distribution,
-            alpha: alpha.into(),
-        },
+        roughness: Roughness::isotropic(distribution, alpha.into()),
         specular_reflectance: Rgb::ONE.into(),
         specular_transmittance: Rgb::ONE.into(),
     }))

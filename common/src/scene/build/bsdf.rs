@@ -309,38 +309,44 @@ impl Builder<'_> {
         })
     }
 
-    /// A rough conductor's microfacets, whose `alpha` may be a texture.
+    /// A rough conductor's or dielectric's microfacets, as Mitsuba reads them: `alpha`, or both
+    /// `alpha_u` and `alpha_v` (anisotropic), each a number or a texture; 0.1 by default.
     pub(super) fn roughness(&mut self, p: &Props) -> Res<Roughness> {
-        let textured = ["alpha", "alpha_u", "alpha_v"]
-            .into_iter()
-            .find_map(|name| self.texture_param(p, name).transpose().map(|t| (name, t)));
-        match textured {
-            Some((name, texture)) => {
-                if name != "alpha" {
-                    return Err(p.err_at(
-                        name,
-                        "a texture for alpha_u or alpha_v (anisotropic roughness) is not supported".into(),
-                    ));
+        let distribution = self.distribution(p)?;
+        let given = |name: &str| {
+            p.tag_of(name).is_some()
+                || p.named_object("texture", name).is_some()
+                || p.named_object("ref", name).is_some()
+        };
+        let mut param = |name: &str| -> Res<Param<f32>> {
+            let a = self.float_param(p, name, 0.1)?;
+            match a {
+                Param::Fixed(x) if x.is_nan() || x < 0.0 => {
+                    Err(p.err_at(name, format!("{name} cannot be negative, not {x}")))
                 }
-                let mf = self.microfacet(p)?;
+                a => Ok(a),
+            }
+        };
+        match (given("alpha"), given("alpha_u"), given("alpha_v")) {
+            (_, false, false) => Ok(Roughness::isotropic(distribution, param("alpha")?)),
+            (false, true, true) => {
+                let (alpha_u, alpha_v) = (param("alpha_u")?, param("alpha_v")?);
+                let anisotropic =
+                    !matches!((&alpha_u, &alpha_v), (Param::Fixed(u), Param::Fixed(v)) if u == v);
                 Ok(Roughness {
-                    distribution: mf.distribution,
-                    alpha: Param::Textured(texture?),
+                    distribution,
+                    alpha_u,
+                    alpha_v,
+                    anisotropic,
                 })
             }
-            None => {
-                let mf = self.microfacet(p)?;
-                Ok(Roughness {
-                    distribution: mf.distribution,
-                    alpha: Param::Fixed(mf.alpha),
-                })
-            }
+            (true, _, _) => Err(self.ctx.err(p.el, "give alpha, or alpha_u and alpha_v, not both")),
+            _ => Err(self.ctx.err(p.el, "give both alpha_u and alpha_v")),
         }
     }
 
-    /// A rough material's microfacets: Mitsuba's `distribution` (default Beckmann) and `alpha`
-    /// (default 0.1, at least 1e-4 as Mitsuba clamps it).
-    pub(super) fn microfacet(&self, p: &Props) -> Res<Microfacet> {
+    /// Mitsuba's `distribution` (default Beckmann), sampled by its visible normals.
+    fn distribution(&self, p: &Props) -> Res<Distribution> {
         let distribution = match p.string("distribution")?.map(str::to_ascii_lowercase).as_deref() {
             None | Some("beckmann") => Distribution::Beckmann,
             Some("ggx") => Distribution::Ggx,
@@ -351,28 +357,27 @@ impl Builder<'_> {
                 ));
             }
         };
-        let alpha = match (p.float("alpha")?, p.float("alpha_u")?, p.float("alpha_v")?) {
-            (Some(a), None, None) => a,
-            (None, None, None) => 0.1,
-            (None, Some(u), Some(v)) if u == v => u,
-            (None, Some(_), Some(_)) => {
-                return Err(self.ctx.err(
-                    p.el,
-                    "anisotropic roughness (alpha_u different from alpha_v) is not supported",
-                ));
-            }
-            _ => return Err(self.ctx.err(p.el, "give alpha, or both alpha_u and alpha_v")),
-        };
-        if alpha.is_nan() || alpha < 0.0 {
-            return Err(p.err_at("alpha", format!("alpha cannot be negative, not {alpha}")));
-        }
         if p.boolean("sample_visible")? == Some(false) {
             return Err(p.err_at("sample_visible", "sample_visible=false is not supported".into()));
         }
-        Ok(Microfacet {
-            distribution,
-            alpha: alpha.max(1e-4),
-        })
+        Ok(distribution)
+    }
+
+    /// A rough plastic's microfacets: Mitsuba's `distribution` and one `alpha` (default 0.1, at
+    /// least 1e-4 as Mitsuba clamps it); Mitsuba's roughplastic has no anisotropic form.
+    pub(super) fn microfacet(&self, p: &Props) -> Res<Microfacet> {
+        let distribution = self.distribution(p)?;
+        if p.tag_of("alpha_u").is_some() || p.tag_of("alpha_v").is_some() {
+            return Err(self.ctx.err(
+                p.el,
+                "roughplastic takes one alpha (Mitsuba's has no alpha_u or alpha_v)",
+            ));
+        }
+        let alpha = p.float("alpha")?.unwrap_or(0.1);
+        if alpha.is_nan() || alpha < 0.0 {
+            return Err(p.err_at("alpha", format!("alpha cannot be negative, not {alpha}")));
+        }
+        Ok(Microfacet::isotropic(distribution, alpha.max(1e-4)))
     }
 
     /// int_ior / ext_ior, each a number or one of Mitsuba's names.
