@@ -114,3 +114,12 @@ fn rough_glass_thin_glass_and_mask_match_mitsuba() {
 fn anisotropic_roughness_matches_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("anisotropic");
 }
+
+/// `textured-light.xml`: area lights whose radiance is a checkerboard (a rectangle) and an
+/// sRGB bitmap (a sphere), seen directly and lighting the scene, as in Mitsuba: by the path
+/// tracer, and by SPPM, whose photons leave with the radiance where they start.
+#[test]
+fn textured_area_lights_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("textured-light");
+    photonfarm_tests::check_sppm_convergence("textured-light");
+}

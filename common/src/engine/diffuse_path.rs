@@ -124,7 +124,10 @@ impl DiffuseScene {
                 let Light::Area(a) = &scene.lights[li as usize] else {
                     return no("a shape's light is not an area light");
                 };
-                emission = a.radiance.to_array();
+                let Param::Fixed(radiance) = &a.radiance else {
+                    return no("an area light's radiance is a texture");
+                };
+                emission = radiance.to_array();
                 light_density = scene.light_sampling.pmf(li as usize) / a.area;
             }
             let [p0, p1, p2] = t.p;

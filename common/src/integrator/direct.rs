@@ -36,7 +36,7 @@ pub fn emitted(
     let Light::Area(area) = &scene.lights[light as usize] else {
         return Rgb::ZERO;
     };
-    let le = area.emitted(sp.ns, wo);
+    let le = area.emitted(sp.uv, sp.ns, wo);
     if le == Rgb::ZERO {
         return le;
     }

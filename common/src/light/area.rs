@@ -7,12 +7,14 @@ use crate::color::{Rgb, luminance};
 use crate::geometry::Frame;
 use crate::geometry::{Primitive, Sphere};
 use crate::sampling::{Distribution1D, square_to_cosine_hemisphere};
+use crate::texture::Param;
 
-/// A shape that emits constant radiance from its front side (Mitsuba's `area` emitter).
+/// A shape that emits from its front side (Mitsuba's `area` emitter), a fixed radiance or one
+/// read from a texture at the surface's (u, v).
 #[derive(Clone, Debug)]
 pub struct AreaLight {
     /// Emitted radiance.
-    pub radiance: Rgb,
+    pub radiance: Param<Rgb>,
     /// Indices of the shape's primitives in the BVH.
     pub prims: Vec<u32>,
     /// Chooses a primitive in proportion to its area, so points are uniform over the shape.
@@ -27,7 +29,7 @@ pub struct AreaLight {
 
 impl AreaLight {
     /// A light over the given primitives.
-    pub fn new(radiance: Rgb, prims: Vec<u32>, all: &[Primitive]) -> AreaLight {
+    pub fn new(radiance: Param<Rgb>, prims: Vec<u32>, all: &[Primitive]) -> AreaLight {
         let areas: Vec<f32> = prims.iter().map(|&i| all[i as usize].area()).collect();
         let area_distribution = Distribution1D::new(&areas);
         let sphere = match prims.as_slice() {
@@ -61,9 +63,14 @@ impl AreaLight {
         Some((s, to_c / dc, dc, one_minus_cos))
     }
 
-    /// Radiance leaving the surface with normal `n` in direction `w`: only the front emits.
-    pub fn emitted(&self, n: Vec3A, w: Vec3A) -> Rgb {
-        if n.dot(w) > 0.0 { self.radiance } else { Rgb::ZERO }
+    /// Radiance leaving the surface at `uv` with normal `n` in direction `w`: only the front
+    /// emits.
+    pub fn emitted(&self, uv: Vec2, n: Vec3A, w: Vec3A) -> Rgb {
+        if n.dot(w) > 0.0 {
+            self.radiance.at(uv)
+        } else {
+            Rgb::ZERO
+        }
     }
 
     /// Density per unit solid angle of sampling `p_light` (normal `n`) from `p`.
@@ -107,7 +114,7 @@ impl AreaLight {
             return None;
         }
         let wi = d / dist2.sqrt();
-        let radiance = self.emitted(sp.ns, -wi);
+        let radiance = self.emitted(sp.uv, sp.ns, -wi);
         if radiance == Rgb::ZERO {
             return None;
         }
@@ -124,7 +131,7 @@ impl AreaLight {
     }
 
     /// A uniform point on the surface and a cosine-distributed direction on its front side:
-    /// the power is then radiance · π · area.
+    /// the power is then the point's radiance · π · area.
     pub(super) fn sample_emission(
         &self,
         prims: &[Primitive],
@@ -142,11 +149,17 @@ impl AreaLight {
             origin_err: sp.p_err,
             n: sp.ng,
             dir,
-            power: self.radiance * (PI * self.area),
+            power: self.radiance.at(sp.uv) * (PI * self.area),
         })
     }
 
+    /// For a texture, its mean over (u, v) stands for the mean over the area: the choice of
+    /// lights only needs a weight that its densities agree with.
     pub(super) fn power(&self) -> f32 {
-        PI * self.area * luminance(self.radiance)
+        let l = match &self.radiance {
+            Param::Fixed(r) => luminance(*r),
+            Param::Textured(t) => t.mean(),
+        };
+        PI * self.area * l
     }
 }

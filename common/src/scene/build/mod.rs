@@ -25,7 +25,7 @@ use crate::job::Integrator;
 use crate::light::{AreaLight, Light, SceneSphere};
 use crate::medium::Medium;
 use crate::sampling::Distribution1D;
-use crate::texture::Texture;
+use crate::texture::{Param, Texture};
 
 pub(super) fn load(path: &Path, defines: &[(String, String)], root: FileRoot) -> Result<Scene, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError {
@@ -82,7 +82,7 @@ struct Builder<'a> {
     shapes: Vec<ShapeInfo>,
     prims: Vec<Primitive>,
     /// Area emitters, by shape, until the BVH has fixed the primitives' order.
-    area_emitters: Vec<(u32, Rgb)>,
+    area_emitters: Vec<(u32, Param<Rgb>)>,
     lights: Vec<Light>,
     light_media: Vec<Option<u32>>,
     media: Vec<Medium>,

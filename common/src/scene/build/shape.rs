@@ -157,7 +157,10 @@ impl Builder<'_> {
             if ep.kind()? != "area" {
                 return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
             }
-            let radiance = ep.emission("radiance", Rgb::ONE)?;
+            let radiance = match self.texture_param(&ep, "radiance")? {
+                Some(t) => Param::Textured(t),
+                None => Param::Fixed(ep.emission("radiance", Rgb::ONE)?),
+            };
             ep.finish()?;
             self.area_emitters.push((index, radiance));
         }
