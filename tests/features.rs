@@ -123,3 +123,11 @@ fn textured_area_lights_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("textured-light");
     photonfarm_tests::check_sppm_convergence("textured-light");
 }
+
+/// `textured-spot.xml`: a spot light projecting a bitmap over its cone, as Mitsuba's `spot`
+/// with a `texture`: by the path tracer, and by SPPM, whose photons carry the texture's colour.
+#[test]
+fn textured_spot_light_matches_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("textured-spot");
+    photonfarm_tests::check_sppm_convergence("textured-spot");
+}

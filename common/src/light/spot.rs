@@ -1,13 +1,17 @@
 use std::f32::consts::PI;
 
-use glam::{Mat3A, Vec3A};
+use std::sync::Arc;
+
+use glam::{Mat3A, Vec2, Vec3A};
 
 use super::{EmittedPhoton, LightSample};
 use crate::color::{Rgb, luminance};
 use crate::sampling::{square_to_uniform_cone, square_to_uniform_cone_pdf};
+use crate::texture::Texture;
 
 /// A point light restricted to a cone (Mitsuba's `spot`): full intensity within `beam_width`,
-/// falling linearly in angle to zero at `cutoff_angle`.
+/// falling linearly in angle to zero at `cutoff_angle`, and scaled by a texture projected over
+/// the cone, if it has one.
 #[derive(Clone, Debug)]
 pub struct SpotLight {
     /// Position.
@@ -20,6 +24,8 @@ pub struct SpotLight {
     pub cutoff: f32,
     /// Beam width, radians.
     pub beam_width: f32,
+    /// Mitsuba's `texture`: (u, v) spans the square the cutoff cone's base fits in.
+    pub texture: Option<Arc<Texture>>,
 }
 
 impl SpotLight {
@@ -36,6 +42,17 @@ impl SpotLight {
         }
     }
 
+    /// The texture's colour along local direction `d`, at Mitsuba's (u, v):
+    /// ½ + ½ · (x, y) / (z · tan cutoff).
+    fn projected(&self, d: Vec3A) -> Rgb {
+        let Some(t) = &self.texture else {
+            return Rgb::ONE;
+        };
+        let d = d.normalize_or_zero();
+        let scale = 0.5 / (d.z * libm::tanf(self.cutoff));
+        t.eval(Vec2::new(0.5 + d.x * scale, 0.5 + d.y * scale))
+    }
+
     pub(super) fn sample_li(&self, p: Vec3A) -> Option<LightSample> {
         let d = self.position - p;
         let dist2 = d.length_squared();
@@ -43,13 +60,14 @@ impl SpotLight {
             return None;
         }
         let wi = d / dist2.sqrt();
-        let falloff = self.falloff(self.to_local * -wi);
+        let local = self.to_local * -wi;
+        let falloff = self.falloff(local);
         (falloff > 0.0).then(|| LightSample {
             p: self.position,
             p_err: Vec3A::ZERO,
             n: Vec3A::ZERO,
             wi,
-            radiance: self.intensity * (falloff / dist2),
+            radiance: self.intensity * self.projected(local) * (falloff / dist2),
             pdf: 1.0,
             delta: true,
         })
@@ -65,10 +83,14 @@ impl SpotLight {
             origin_err: Vec3A::ZERO,
             n: Vec3A::ZERO,
             dir: (self.to_local.transpose() * local).normalize(),
-            power: self.intensity * (falloff / square_to_uniform_cone_pdf(cos_cutoff)),
+            power: self.intensity
+                * self.projected(local)
+                * (falloff / square_to_uniform_cone_pdf(cos_cutoff)),
         })
     }
 
+    /// With a texture, its mean stands for its mean over the cone: the choice of lights only
+    /// needs a weight that its densities agree with.
     pub(super) fn power(&self) -> f32 {
         // 2π ∫ falloff(θ) sin θ dθ over the cone, by the midpoint rule.
         let n = 256;
@@ -79,6 +101,7 @@ impl SpotLight {
             let d = Vec3A::new(sin_theta, 0.0, cos_theta);
             sum += self.falloff(d) * sin_theta * self.cutoff / n as f32;
         }
-        2.0 * PI * sum * luminance(self.intensity)
+        let texture = self.texture.as_ref().map_or(1.0, |t| t.mean());
+        2.0 * PI * sum * luminance(self.intensity) * texture
     }
 }

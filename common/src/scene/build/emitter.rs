@@ -48,6 +48,7 @@ impl Builder<'_> {
                     intensity: p.emission("intensity", Rgb::ONE)?,
                     cutoff: cutoff.to_radians(),
                     beam_width: beam.to_radians(),
+                    texture: self.texture_param(&p, "texture")?,
                 })
             }
             "beam" => {
