@@ -462,3 +462,47 @@ fn every_shipped_scene_loads() {
         }
     }
 }
+
+/// Rough materials and projectors refuse what Mitsuba refuses or what they cannot place.
+#[test]
+fn roughness_and_projector_mistakes() {
+    let rough = |params: &str| {
+        format!("<shape type=\"sphere\"><bsdf type=\"roughconductor\">{params}</bsdf></shape>")
+    };
+    expect_error(
+        &scene_text(&rough("<float name=\"alpha_u\" value=\"0.1\"/>"), FILM),
+        8,
+        "give both alpha_u and alpha_v",
+    );
+    expect_error(
+        &scene_text(
+            &rough(
+                "<float name=\"alpha\" value=\"0.1\"/><float name=\"alpha_u\" value=\"0.1\"/><float name=\"alpha_v\" value=\"0.2\"/>",
+            ),
+            FILM,
+        ),
+        8,
+        "give alpha, or alpha_u and alpha_v, not both",
+    );
+    expect_error(
+        &scene_text(
+            "<shape type=\"sphere\"><bsdf type=\"roughplastic\"><float name=\"alpha_u\" value=\"0.1\"/></bsdf></shape>",
+            FILM,
+        ),
+        8,
+        "roughplastic takes one alpha",
+    );
+    expect_error(
+        &scene_text("<emitter type=\"projector\"/>", FILM),
+        8,
+        "a projector needs an irradiance",
+    );
+    expect_error(
+        &scene_text(
+            "<emitter type=\"projector\"><rgb name=\"irradiance\" value=\"1\"/>\n<transform name=\"to_world\"><scale value=\"2\"/></transform></emitter>",
+            FILM,
+        ),
+        9,
+        "a projector's to_world places and turns it",
+    );
+}

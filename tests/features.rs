@@ -131,3 +131,11 @@ fn textured_spot_light_matches_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("textured-spot");
     photonfarm_tests::check_sppm_convergence("textured-spot");
 }
+
+/// `projector.xml`: Mitsuba's projector throwing a 3:2 bitmap with a vertical field of view and
+/// a scale: by the path tracer, and by SPPM, whose photons leave through the image.
+#[test]
+fn projector_matches_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("projector");
+    photonfarm_tests::check_sppm_convergence("projector");
+}

@@ -8,6 +8,7 @@ mod beam;
 mod distant;
 mod envmap;
 mod point;
+mod projector;
 mod spot;
 
 pub use area::AreaLight;
@@ -15,6 +16,7 @@ pub use beam::BeamLight;
 pub use distant::{ConstantLight, DirectionalLight, SceneSphere};
 pub use envmap::EnvmapLight;
 pub use point::PointLight;
+pub use projector::ProjectorLight;
 pub use spot::SpotLight;
 
 use glam::Vec3A;
@@ -66,6 +68,8 @@ pub enum Light {
     Point(PointLight),
     /// Point with Mitsuba's spot falloff.
     Spot(SpotLight),
+    /// Point that throws an image (Mitsuba's projector).
+    Projector(ProjectorLight),
     /// Collimated beam from a disc.
     Beam(BeamLight),
     /// The same radiance from every direction, at infinity.
@@ -83,6 +87,7 @@ impl Light {
         match self {
             Light::Point(l) => Some(l.position),
             Light::Spot(l) => Some(l.position),
+            Light::Projector(l) => Some(l.position),
             _ => None,
         }
     }
@@ -109,6 +114,7 @@ impl Light {
             Light::Area(l) => l.sample_li(p, prims, u),
             Light::Point(l) => l.sample_li(p),
             Light::Spot(l) => l.sample_li(p),
+            Light::Projector(l) => l.sample_li(p),
             Light::Beam(l) => l.sample_li(p),
             Light::Constant(l) => l.sample_li(p, u),
             Light::Envmap(l) => l.sample_li(p, u),
@@ -127,6 +133,7 @@ impl Light {
             Light::Area(l) => l.sample_emission(prims, u_pos, u_dir),
             Light::Point(l) => l.sample_emission(u_dir),
             Light::Spot(l) => l.sample_emission(u_dir),
+            Light::Projector(l) => l.sample_emission(u_dir),
             Light::Beam(l) => l.sample_emission(u_pos),
             Light::Constant(l) => l.sample_emission(u_pos, u_dir),
             Light::Envmap(l) => l.sample_emission(u_pos, u_dir),
@@ -140,6 +147,7 @@ impl Light {
             Light::Area(l) => l.power(),
             Light::Point(l) => l.power(),
             Light::Spot(l) => l.power(),
+            Light::Projector(l) => l.power(),
             Light::Beam(l) => l.power(),
             Light::Constant(l) => l.power(),
             Light::Envmap(l) => l.power(),

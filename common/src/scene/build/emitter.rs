@@ -5,11 +5,12 @@ use glam::{Mat3A, Mat4, Vec3A};
 use crate::color::Rgb;
 use crate::geometry::Frame;
 use crate::light::{
-    BeamLight, ConstantLight, DirectionalLight, EnvmapLight, Light, PointLight, SceneSphere, SpotLight,
+    BeamLight, ConstantLight, DirectionalLight, EnvmapLight, Light, PointLight, ProjectorLight, SceneSphere,
+    SpotLight,
 };
 use crate::scene::props::{Props, Res};
 use crate::scene::xml::Element;
-use crate::texture::{Bitmap, Filter as TexFilter, Wrap};
+use crate::texture::{Bitmap, Filter as TexFilter, Param, Texture, Wrap};
 
 use super::Builder;
 
@@ -49,6 +50,42 @@ impl Builder<'_> {
                     cutoff: cutoff.to_radians(),
                     beam_width: beam.to_radians(),
                     texture: self.texture_param(&p, "texture")?,
+                })
+            }
+            "projector" => {
+                let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+                let (scale, rotation, translation) = m.to_scale_rotation_translation();
+                if (scale - glam::Vec3::ONE).abs().max_element() > 1e-4 {
+                    return Err(p.err_at(
+                        "to_world",
+                        "a projector's to_world places and turns it; set its spread with fov".into(),
+                    ));
+                }
+                let irradiance = match self.texture_param(&p, "irradiance")? {
+                    Some(t) => Param::Textured(t),
+                    None => match p.tag_of("irradiance") {
+                        Some(_) => Param::Fixed(p.emission("irradiance", Rgb::ONE)?),
+                        None => return Err(self.ctx.err(el, "a projector needs an irradiance")),
+                    },
+                };
+                // Mitsuba sizes the virtual image by the texture's resolution (1 x 1 for
+                // anything but a bitmap).
+                let (w, h) = match &irradiance {
+                    Param::Textured(t) => match t.as_ref() {
+                        Texture::Bitmap(b) => b.size(),
+                        _ => (1, 1),
+                    },
+                    Param::Fixed(_) => (1, 1),
+                };
+                let aspect = w as f64 / h as f64;
+                let (fov, fov_axis) = self.field_of_view(&p, el, false)?;
+                Light::Projector(ProjectorLight {
+                    position: translation.into(),
+                    to_local: Mat3A::from_quat(rotation).transpose(),
+                    tan_half_x: super::sensor::tan_half_x(&p, fov, fov_axis, aspect)? as f32,
+                    aspect: aspect as f32,
+                    irradiance,
+                    scale: p.float_or("scale", 1.0)?,
                 })
             }
             "beam" => {
@@ -150,7 +187,7 @@ impl Builder<'_> {
                 return Err(self.ctx.err(
                     el,
                     format!(
-                        "emitter type \"{other}\" is not supported (point, spot, area, beam, constant, envmap, directional)"
+                        "emitter type \"{other}\" is not supported (point, spot, projector, area, beam, constant, envmap, directional)"
                     ),
                 ));
             }

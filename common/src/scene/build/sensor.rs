@@ -52,6 +52,54 @@ impl Builder<'_> {
             }
         }
         let orthographic = kind == "orthographic";
+        let (fov, fov_axis) = self.field_of_view(&p, el, orthographic)?;
+
+        let (_, _, medium) = self.media_of(&p, false)?;
+        self.camera_medium = medium;
+        let film = p
+            .object("film")?
+            .ok_or_else(|| self.ctx.err(el, "the sensor has no <film>"))?;
+        let (width, height, filter) = self.film(film)?;
+        let referred = p
+            .objects("ref")
+            .into_iter()
+            .find_map(|r| self.sampler_ids.get(r.attr("id")?).copied());
+        let spp = match (p.object("sampler")?, referred) {
+            (Some(s), _) => self.sampler(s)?,
+            (None, Some(spp)) => spp,
+            (None, None) => 4,
+        };
+        p.finish()?;
+
+        let aspect = width as f64 / height as f64;
+        let tan_half_x = if orthographic {
+            1.0
+        } else {
+            tan_half_x(&p, fov, fov_axis, aspect)?
+        };
+        let camera = Camera {
+            to_world,
+            tan_half_x: tan_half_x as f32,
+            tan_half_y: (tan_half_x / aspect) as f32,
+            orthographic,
+            width,
+            height,
+            aperture_radius,
+            focus_distance,
+            near_clip,
+        };
+        Ok((camera, spp, filter))
+    }
+
+    /// Mitsuba's field of view of a perspective camera or projector: `fov` along `fov_axis`
+    /// (default x), or `focal_length` (default 50 mm) along the 35 mm film's diagonal. In
+    /// degrees, with its axis.
+    pub(super) fn field_of_view<'a>(
+        &self,
+        p: &Props<'a>,
+        el: &Element,
+        orthographic: bool,
+    ) -> Res<(f32, &'a str)> {
         let (fov, fov_axis) = match (p.float("fov")?, p.string("focal_length")?) {
             // Mitsuba's orthographic camera has no field of view: its to_world's scale sets
             // the extent it sees.
@@ -89,54 +137,7 @@ impl Builder<'_> {
             return Err(p.err_at("fov", format!("fov must lie in (0, 180) degrees, not {fov}")));
         }
 
-        let (_, _, medium) = self.media_of(&p, false)?;
-        self.camera_medium = medium;
-        let film = p
-            .object("film")?
-            .ok_or_else(|| self.ctx.err(el, "the sensor has no <film>"))?;
-        let (width, height, filter) = self.film(film)?;
-        let referred = p
-            .objects("ref")
-            .into_iter()
-            .find_map(|r| self.sampler_ids.get(r.attr("id")?).copied());
-        let spp = match (p.object("sampler")?, referred) {
-            (Some(s), _) => self.sampler(s)?,
-            (None, Some(spp)) => spp,
-            (None, None) => 4,
-        };
-        p.finish()?;
-
-        // Mitsuba converts every fov_axis to the x axis's field of view.
-        let aspect = width as f64 / height as f64;
-        let tan_half = libm::tan((fov as f64).to_radians() * 0.5);
-        let tan_half_x = match fov_axis {
-            "x" => tan_half,
-            "y" => tan_half * aspect,
-            "diagonal" => tan_half * aspect / (aspect * aspect + 1.0).sqrt(),
-            "smaller" if aspect > 1.0 => tan_half * aspect,
-            "smaller" => tan_half,
-            "larger" if aspect > 1.0 => tan_half,
-            "larger" => tan_half * aspect,
-            other => {
-                return Err(p.err_at(
-                    "fov_axis",
-                    format!("fov_axis \"{other}\" is not supported (x, y, diagonal, smaller, larger)"),
-                ));
-            }
-        };
-        let tan_half_x = if orthographic { 1.0 } else { tan_half_x };
-        let camera = Camera {
-            to_world,
-            tan_half_x: tan_half_x as f32,
-            tan_half_y: (tan_half_x / aspect) as f32,
-            orthographic,
-            width,
-            height,
-            aperture_radius,
-            focus_distance,
-            near_clip,
-        };
-        Ok((camera, spp, filter))
+        Ok((fov, fov_axis))
     }
 
     pub(super) fn film(&mut self, el: &Element) -> Res<(u32, u32, Filter)> {
@@ -230,4 +231,25 @@ impl Builder<'_> {
         p.finish()?;
         Ok(spp as u32)
     }
+}
+
+/// tan(fov_x / 2) of a field of view `fov` (degrees) along `fov_axis` on an image of width over
+/// height `aspect`: Mitsuba converts every fov_axis to the x axis's field of view.
+pub(super) fn tan_half_x(p: &Props, fov: f32, fov_axis: &str, aspect: f64) -> Res<f64> {
+    let tan_half = libm::tan((fov as f64).to_radians() * 0.5);
+    Ok(match fov_axis {
+        "x" => tan_half,
+        "y" => tan_half * aspect,
+        "diagonal" => tan_half * aspect / (aspect * aspect + 1.0).sqrt(),
+        "smaller" if aspect > 1.0 => tan_half * aspect,
+        "smaller" => tan_half,
+        "larger" if aspect > 1.0 => tan_half,
+        "larger" => tan_half * aspect,
+        other => {
+            return Err(p.err_at(
+                "fov_axis",
+                format!("fov_axis \"{other}\" is not supported (x, y, diagonal, smaller, larger)"),
+            ));
+        }
+    })
 }
