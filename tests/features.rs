@@ -139,3 +139,10 @@ fn projector_matches_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("projector");
     photonfarm_tests::check_sppm_convergence("projector");
 }
+
+/// `cylinder.xml`: Mitsuba's analytic cylinder, its (u, v) under a checkerboard, its ∂p/∂u under
+/// an anisotropic conductor, as an area light, and seen from inside through its open end.
+#[test]
+fn cylinders_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("cylinder");
+}

@@ -3,6 +3,7 @@
 mod aabb;
 mod bvh;
 mod bvh4;
+mod cylinder;
 mod frame;
 mod instance;
 mod packet;
@@ -12,6 +13,7 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use bvh::{Backend, Bvh};
+pub use cylinder::Cylinder;
 pub use frame::Frame;
 pub use instance::Instance;
 pub use packet::{Hits8, Rays8};
@@ -28,6 +30,8 @@ pub enum Primitive {
     Triangle(Triangle),
     /// An analytic sphere: exact silhouette and normals, which glass spheres need.
     Sphere(Sphere),
+    /// An analytic open tube (Mitsuba's `cylinder`).
+    Cylinder(Box<Cylinder>),
     /// A placed copy of a shape group, tested in the group's own tree.
     Instance(Box<Instance>),
 }
@@ -106,6 +110,7 @@ impl Primitive {
         match self {
             Primitive::Triangle(t) => t.bounds(),
             Primitive::Sphere(s) => s.bounds(),
+            Primitive::Cylinder(c) => c.bounds(),
             Primitive::Instance(i) => i.bounds(),
         }
     }
@@ -116,6 +121,7 @@ impl Primitive {
         match self {
             Primitive::Triangle(t) => t.shape,
             Primitive::Sphere(s) => s.shape,
+            Primitive::Cylinder(c) => c.shape,
             Primitive::Instance(_) => u32::MAX,
         }
     }
@@ -126,6 +132,7 @@ impl Primitive {
         match self {
             Primitive::Triangle(t) => t.area(),
             Primitive::Sphere(s) => s.area(),
+            Primitive::Cylinder(c) => c.area(),
             Primitive::Instance(_) => 0.0,
         }
     }
@@ -145,6 +152,12 @@ impl Primitive {
                 b2: 0.0,
                 inner: 0,
             }),
+            Primitive::Cylinder(c) => c.intersect(ray, t_max).map(|t| PrimHit {
+                t,
+                b1: 0.0,
+                b2: 0.0,
+                inner: 0,
+            }),
             Primitive::Instance(i) => i.intersect_placed(ray, t_max),
         }
     }
@@ -154,6 +167,7 @@ impl Primitive {
         match self {
             Primitive::Triangle(t) => t.surface(hit.b1, hit.b2),
             Primitive::Sphere(s) => s.surface(ray.o + ray.d * hit.t),
+            Primitive::Cylinder(c) => c.surface(ray.o + ray.d * hit.t),
             Primitive::Instance(i) => i.surface(
                 ray,
                 &Hit {
@@ -175,6 +189,7 @@ impl Primitive {
             Primitive::Sphere(s) => {
                 s.surface(s.center + s.radius * crate::sampling::square_to_uniform_sphere(u))
             }
+            Primitive::Cylinder(c) => c.sample_point(u),
             Primitive::Instance(_) => {
                 unreachable!("the loader refuses emitters in shape groups, so no light holds an instance")
             }

@@ -7,7 +7,7 @@ use glam::{Mat4, Vec3A};
 
 use crate::bsdf::{Bsdf, Diffuse};
 use crate::color::Rgb;
-use crate::geometry::{Bvh, Instance, Primitive, Sphere, Triangle};
+use crate::geometry::{Bvh, Cylinder, Instance, Primitive, Sphere, Triangle};
 use crate::scene::ShapeInfo;
 use crate::scene::mesh::{self, Mesh};
 use crate::scene::props::{Props, Res};
@@ -46,6 +46,44 @@ impl Builder<'_> {
                     flip,
                     rotation,
                 }));
+                None
+            }
+            "cylinder" => {
+                // Mitsuba's: the tube from p0 to p1 of the radius, then to_world, which may
+                // scale it but not into an ellipse.
+                let p0 = p.point("p0")?.unwrap_or(Vec3A::ZERO);
+                let p1 = p.point("p1")?.unwrap_or(Vec3A::Z);
+                let radius = p.positive("radius", 1.0)?;
+                let axis = p1 - p0;
+                let length = axis.length();
+                if length.is_nan() || length == 0.0 {
+                    return Err(self.ctx.err(el, "a cylinder's p0 and p1 must differ"));
+                }
+                let f = crate::geometry::Frame::from_normal(axis / length);
+                let frame = Mat4::from_cols(f.s.extend(0.0), f.t.extend(0.0), f.n.extend(0.0), glam::Vec4::W);
+                let m = to_world
+                    * Mat4::from_translation(p0.into())
+                    * frame
+                    * Mat4::from_scale(glam::Vec3::new(radius, radius, length));
+                let (scale, rotation, translation) = m.to_scale_rotation_translation();
+                if (scale.x.abs() - scale.y.abs()).abs() > 1e-4 * scale.x.abs() {
+                    return Err(self
+                        .ctx
+                        .err(el, "a cylinder's to_world must scale its cross-section uniformly"));
+                }
+                if scale.min_element() <= 0.0 {
+                    return Err(self
+                        .ctx
+                        .err(el, "a mirroring to_world on a cylinder is not supported"));
+                }
+                self.prims.push(Primitive::Cylinder(Box::new(Cylinder {
+                    base: translation.into(),
+                    rotation,
+                    radius: scale.x,
+                    length: scale.z,
+                    shape: index,
+                    flip,
+                })));
                 None
             }
             "rectangle" => Some(mesh::rectangle()),
@@ -93,7 +131,7 @@ impl Builder<'_> {
                 return Err(self.ctx.err(
                     el,
                     format!(
-                        "shape type \"{other}\" is not supported (sphere, rectangle, cube, disk, obj, ply, \
+                        "shape type \"{other}\" is not supported (sphere, cylinder, rectangle, cube, disk, obj, ply, \
                          serialized, shapegroup, instance)"
                     ),
                 ));
