@@ -1089,7 +1089,7 @@ mod tests {
     #[test]
     fn a_result_whose_lease_moved_on_never_replaces_the_one_that_counts() {
         let dir = tempfile::tempdir().unwrap();
-        let (mut farm, job) = one_job_farm(dir.path(), 30);
+        let (mut farm, job) = one_job_farm(dir.path(), 400);
         let layout = farm.layout();
         let result = |value: i64| {
             let mut sum = FilmSum::new(4, 4);
@@ -1105,8 +1105,9 @@ mod tests {
         // Worker a's result is checked against its live lease (its head arrives)...
         let late = ask(&mut farm, "a").unwrap();
         farm.expected_result(late.lease_id, &late.key).unwrap();
-        // ...but its body is slow: the lease expires and worker b renders the same passes.
-        std::thread::sleep(std::time::Duration::from_millis(60));
+        // ...but its body is slow: the lease expires and worker b renders the same passes. (b
+        // then has the lease's 400 ms to commit: 30 ms failed once under the suite's load.)
+        std::thread::sleep(std::time::Duration::from_millis(500));
         assert_eq!(farm.expire().unwrap(), 1);
         let honest = ask(&mut farm, "b").unwrap();
         assert_eq!((honest.start, honest.end), (late.start, late.end));
