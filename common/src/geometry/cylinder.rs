@@ -100,10 +100,7 @@ impl Cylinder {
         let offset = self.rotation * local;
         let p = self.base + offset;
         let p_err = gamma(6) * offset.abs() + gamma(1) * p.abs() + gamma(1) * self.base.abs();
-        let mut phi = libm::atan2f(cy, cx);
-        if phi < 0.0 {
-            phi += 2.0 * PI;
-        }
+        let phi = super::azimuth(cy, cx);
         let uv = Vec2::new(phi / (2.0 * PI), local.z / self.length);
         // Mitsuba's ∂p/∂u = 2π (−y, x, 0) and ∂p/∂v = (0, 0, length) in the local frame.
         let dpdu = self.rotation * Vec3A::new(-local.y, local.x, 0.0) * (2.0 * PI);

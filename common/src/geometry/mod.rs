@@ -197,6 +197,18 @@ impl Primitive {
     }
 }
 
+/// The angle of (x, y) about the origin from +x, in [0, 2π): the u of Mitsuba's analytic
+/// shapes.
+#[inline]
+pub(crate) fn azimuth(y: f32, x: f32) -> f32 {
+    let phi = libm::atan2f(y, x);
+    if phi < 0.0 {
+        phi + 2.0 * std::f32::consts::PI
+    } else {
+        phi
+    }
+}
+
 /// pbrt's γ(n): the relative error bound of n chained floating-point operations.
 #[inline]
 pub(crate) fn gamma(n: i32) -> f32 {

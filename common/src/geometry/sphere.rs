@@ -75,10 +75,7 @@ impl Sphere {
         // Mitsuba's parameterisation: u the longitude about the local z axis from +x, v the
         // colatitude from +z.
         let l = self.rotation.inverse() * glam::Vec3::from(n);
-        let mut phi = libm::atan2f(l.y, l.x);
-        if phi < 0.0 {
-            phi += 2.0 * std::f32::consts::PI;
-        }
+        let phi = super::azimuth(l.y, l.x);
         let uv = Vec2::new(
             phi * std::f32::consts::FRAC_1_PI * 0.5,
             libm::acosf(l.z.clamp(-1.0, 1.0)) * std::f32::consts::FRAC_1_PI,

@@ -3,7 +3,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3A};
 
 use super::{EmittedPhoton, LightSample};
-use crate::color::{Rgb, luminance};
+use crate::color::Rgb;
 use crate::geometry::Frame;
 use crate::geometry::{Primitive, Sphere};
 use crate::sampling::{Distribution1D, square_to_cosine_hemisphere};
@@ -156,10 +156,6 @@ impl AreaLight {
     /// For a texture, its mean over (u, v) stands for the mean over the area: the choice of
     /// lights only needs a weight that its densities agree with.
     pub(super) fn power(&self) -> f32 {
-        let l = match &self.radiance {
-            Param::Fixed(r) => luminance(*r),
-            Param::Textured(t) => t.mean(),
-        };
-        PI * self.area * l
+        PI * self.area * self.radiance.light_weight()
     }
 }

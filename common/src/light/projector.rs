@@ -3,7 +3,7 @@ use std::f32::consts::PI;
 use glam::{Mat3A, Vec2, Vec3A};
 
 use super::{EmittedPhoton, LightSample};
-use crate::color::{Rgb, luminance};
+use crate::color::Rgb;
 use crate::texture::Param;
 
 /// Mitsuba's `projector`: a pinhole that throws an image into the scene, the reciprocal of
@@ -80,10 +80,6 @@ impl ProjectorLight {
     /// A texture's mean over (u, v) gives the emitted power exactly: the photons sample the
     /// image uniformly.
     pub(super) fn power(&self) -> f32 {
-        let e = match &self.irradiance {
-            Param::Fixed(r) => luminance(*r),
-            Param::Textured(t) => t.mean(),
-        };
-        PI * self.scale * self.image_area() * e
+        PI * self.scale * self.image_area() * self.irradiance.light_weight()
     }
 }

@@ -106,6 +106,14 @@ impl Param<Rgb> {
             Param::Textured(t) => t.mean(),
         }
     }
+
+    /// A light's weight for choosing it: a fixed colour's luminance, a texture's mean.
+    pub fn light_weight(&self) -> f32 {
+        match self {
+            Param::Fixed(v) => luminance(*v),
+            Param::Textured(t) => t.mean(),
+        }
+    }
 }
 
 impl Param<f32> {

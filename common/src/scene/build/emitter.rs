@@ -53,14 +53,10 @@ impl Builder<'_> {
                 })
             }
             "projector" => {
-                let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
-                let (scale, rotation, translation) = m.to_scale_rotation_translation();
-                if (scale - glam::Vec3::ONE).abs().max_element() > 1e-4 {
-                    return Err(p.err_at(
-                        "to_world",
-                        "a projector's to_world places and turns it; set its spread with fov".into(),
-                    ));
-                }
+                let (rotation, translation) = placement(
+                    &p,
+                    "a projector's to_world places and turns it; set its spread with fov",
+                )?;
                 let irradiance = match self.texture_param(&p, "irradiance")? {
                     Some(t) => Param::Textured(t),
                     None => match p.tag_of("irradiance") {
@@ -89,14 +85,10 @@ impl Builder<'_> {
                 })
             }
             "beam" => {
-                let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
-                let (scale, rotation, translation) = m.to_scale_rotation_translation();
-                if (scale - glam::Vec3::ONE).abs().max_element() > 1e-4 {
-                    return Err(p.err_at(
-                        "to_world",
-                        "a beam's to_world places and turns it; set its size with radius".into(),
-                    ));
-                }
+                let (rotation, translation) = placement(
+                    &p,
+                    "a beam's to_world places and turns it; set its size with radius",
+                )?;
                 let radius = p.positive("radius", 1.0)?;
                 let area = std::f32::consts::PI * radius * radius;
                 let irradiance = match (p.rgb("irradiance")?, p.rgb("power")?) {
@@ -197,4 +189,15 @@ impl Builder<'_> {
         self.light_media.push(medium);
         Ok(())
     }
+}
+
+/// The rotation and translation of a light's `to_world`, which must not scale (`refusal` says
+/// what to set instead).
+fn placement(p: &Props, refusal: &str) -> Res<(glam::Quat, glam::Vec3)> {
+    let m = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+    let (scale, rotation, translation) = m.to_scale_rotation_translation();
+    if (scale - glam::Vec3::ONE).abs().max_element() > 1e-4 {
+        return Err(p.err_at("to_world", refusal.into()));
+    }
+    Ok((rotation, translation))
 }
