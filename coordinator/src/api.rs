@@ -28,7 +28,7 @@ use tokio::sync::Semaphore;
 
 use crate::accumulator::Accumulator;
 use crate::admission::Admission;
-use crate::farm::{Committed, Farm, FarmError};
+use crate::farm::{Committed, Farm, FarmError, SharedFarm};
 use crate::result_body::{BodyError, lease_key, receive_result_to, result_encoding};
 use crate::scene_check::{CheckError, check_in_child};
 use crate::serving::JSON_LIMIT;
@@ -47,8 +47,9 @@ pub struct Tokens {
 
 /// Shared by every handler.
 pub struct AppState {
-    /// The farm. A std mutex: critical sections are short bookkeeping and never await.
-    pub farm: Mutex<Farm>,
+    /// The farm and its store, each behind a std mutex: critical sections are short and never
+    /// await.
+    pub farm: SharedFarm,
     /// The data folder's paths, for file work outside the farm's lock.
     pub layout: Layout,
     /// Bearer tokens.
@@ -197,9 +198,9 @@ async fn body_bytes(req: Request, state: &Arc<AppState>) -> ApiResult<Bytes> {
         .map_err(|e| ApiError::new(e.status(), e.body_text()))
 }
 
+/// Applies one farm event and commits its writes (see [`SharedFarm::run`]).
 fn with_farm<T>(state: &AppState, f: impl FnOnce(&mut Farm) -> Result<T, FarmError>) -> ApiResult<T> {
-    let mut farm = state.farm.lock().unwrap_or_else(|p| p.into_inner());
-    f(&mut farm).map_err(ApiError::from)
+    state.farm.run(f).map_err(ApiError::from)
 }
 
 async fn blocking<T: Send + 'static>(f: impl FnOnce() -> ApiResult<T> + Send + 'static) -> ApiResult<T> {
@@ -754,15 +755,18 @@ fn store_result(
         job,
         sum: job_sum,
         total,
-    } = with_farm(state, |f| {
-        let committed = f.commit(id, key, len);
-        // Refused (the lease moved on while the body was read): unless a row names the file
-        // (a retried upload of a result already counted), it never counted, and it goes.
-        if committed.is_err() && !f.store().has_batch(expected.job, batch).unwrap_or(true) {
-            let _ = std::fs::remove_file(state.layout.batch_path(expected.job, batch));
+    } = match with_farm(state, |f| f.commit(id, key, len)) {
+        Ok(committed) => committed,
+        Err(e) => {
+            // Refused (the lease moved on while the body was read): unless a row names the
+            // file (a retried upload of a result already counted), it never counted, and it
+            // goes. No row can appear for it meanwhile: only this lease's commit writes one.
+            if !state.farm.store().has_batch(expected.job, batch).unwrap_or(true) {
+                let _ = std::fs::remove_file(state.layout.batch_path(expected.job, batch));
+            }
+            return Err(e);
         }
-        committed
-    })?;
+    };
     merge(state, job, &job_sum, total, expected.start, sum, odd)
 }
 

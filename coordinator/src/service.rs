@@ -13,7 +13,7 @@ use tokio::sync::Semaphore;
 
 use crate::admission::Admission;
 use crate::api::{AppState, Tokens, router};
-use crate::farm::{Farm, FarmConfig};
+use crate::farm::{FarmConfig, SharedFarm};
 use crate::store::Store;
 
 /// Service settings.
@@ -40,15 +40,15 @@ pub async fn run(
 ) -> anyhow::Result<()> {
     let data = config.data.clone();
     let farm_config = config.farm;
-    let farm = tokio::task::spawn_blocking(move || -> anyhow::Result<Farm> {
+    let farm = tokio::task::spawn_blocking(move || -> anyhow::Result<SharedFarm> {
         let store = Store::open(&data)?;
-        Ok(Farm::open(store, farm_config)?)
+        Ok(SharedFarm::open(store, farm_config)?)
     })
     .await??;
     let admission = config.admission;
     let state = Arc::new(AppState {
-        layout: farm.layout(),
-        farm: std::sync::Mutex::new(farm),
+        layout: farm.read(|f| f.layout()),
+        farm,
         tokens: config.tokens.clone(),
         admission,
         checker: config.checker.clone(),
@@ -68,8 +68,7 @@ pub async fn run(
             tick.tick().await;
             let st = expiry_state.clone();
             let _ = tokio::task::spawn_blocking(move || {
-                let mut farm = st.farm.lock().unwrap_or_else(|p| p.into_inner());
-                if let Err(e) = farm.expire() {
+                if let Err(e) = st.farm.run(|f| f.expire()) {
                     tracing::error!("lease expiry: {e}");
                 }
             })

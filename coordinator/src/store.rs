@@ -21,6 +21,8 @@
 //! [`Layout`], which needs no database and so runs outside the farm's lock.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use photonfarm::film::FilmSum;
 use photonfarm::parity::OddSums;
@@ -120,6 +122,102 @@ pub struct LeaseRow {
     pub key: String,
 }
 
+/// A new job's row.
+#[derive(Clone, Debug)]
+pub struct NewJob {
+    /// Id, from [`Store::next_job_id`] at start and counted on in memory.
+    pub id: u64,
+    /// Creation time, Unix milliseconds.
+    pub created_ms: u64,
+    /// The settings as submitted (JSON of `JobSettings`).
+    pub settings: String,
+    /// The resolved render settings (JSON of `RenderSettings`).
+    pub render: String,
+    /// The scene's path inside the bundle.
+    pub scene: String,
+    /// The bundle's hash.
+    pub bundle: String,
+    /// Passes in total.
+    pub total: u64,
+    /// Checkpoint interval.
+    pub window: u64,
+    /// Image size.
+    pub width: u32,
+    /// Image size.
+    pub height: u32,
+}
+
+/// One change to the database. A farm event returns the list of its writes, and
+/// [`Store::apply`] makes them durable together, outside the farm's lock.
+#[derive(Clone, Debug)]
+pub enum Write {
+    /// A job was submitted.
+    InsertJob(NewJob),
+    /// A job's scheduling and counters.
+    Progress {
+        /// The job.
+        id: u64,
+        /// First pass never handed out.
+        next_start: u64,
+        /// State.
+        state: JobState,
+        /// Why it failed.
+        message: Option<String>,
+        /// Counters.
+        stats: JobStats,
+    },
+    /// A job's scheduling only (when it is restored: its counters are as stored).
+    State {
+        /// The job.
+        id: u64,
+        /// First pass never handed out.
+        next_start: u64,
+        /// State.
+        state: JobState,
+        /// Why it failed.
+        message: Option<String>,
+    },
+    /// The pass count of a job's latest image.
+    ImagePasses {
+        /// The job.
+        id: u64,
+        /// Passes in it.
+        passes: u64,
+    },
+    /// A lease was granted.
+    InsertLease(LeaseRow),
+    /// A lease ended (completed, released, expired, or its job is over).
+    DeleteLease(u64),
+    /// A batch result whose file [`Layout::keep_received`] stored: from here on it counts.
+    RecordBatch {
+        /// The job.
+        job: u64,
+        /// The batch.
+        batch: StoredBatch,
+    },
+    /// A batch found damaged: its row and file go.
+    ForgetBatch {
+        /// The job.
+        job: u64,
+        /// The batch.
+        batch: StoredBatch,
+    },
+    /// The batches a stored prefix of `passes` passes contains: their rows and files go.
+    ForgetMerged {
+        /// The job.
+        job: u64,
+        /// Passes in the stored prefix.
+        passes: u64,
+    },
+    /// Noise estimates (passes, variance) of a job.
+    Noise {
+        /// The job.
+        job: u64,
+        /// (passes, variance).
+        points: Vec<(u64, f64)>,
+    },
+}
+
 /// Where everything lives under the data folder: paths only, so it is cheap to clone and
 /// usable without the farm's lock.
 #[derive(Clone, Debug)]
@@ -133,6 +231,8 @@ pub struct Store {
     db: Connection,
     /// Above every job folder found at start: new ids start past it.
     id_floor: u64,
+    /// Transactions committed, counted by SQLite's commit hook.
+    commits: Arc<AtomicU64>,
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
@@ -308,7 +408,7 @@ impl Store {
     pub fn open(dir: &Path) -> Result<Store, StoreError> {
         std::fs::create_dir_all(dir.join("bundles")).map_err(io(dir))?;
         std::fs::create_dir_all(dir.join("jobs")).map_err(io(dir))?;
-        let db = Connection::open(dir.join("photonfarm.sqlite"))?;
+        let mut db = Connection::open(dir.join("photonfarm.sqlite"))?;
         db.execute_batch(
             "PRAGMA journal_mode = WAL;
              PRAGMA synchronous = FULL;
@@ -361,12 +461,19 @@ impl Store {
             .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u64>().ok())
             .max()
             .unwrap_or(0);
+        let commits = Arc::new(AtomicU64::new(0));
+        let counter = commits.clone();
+        db.commit_hook(Some(move || {
+            counter.fetch_add(1, Ordering::Relaxed);
+            false
+        }))?;
         Ok(Store {
             layout: Layout {
                 dir: dir.to_path_buf(),
             },
             db,
             id_floor,
+            commits,
         })
     }
 
@@ -393,48 +500,156 @@ impl Store {
         Ok(base)
     }
 
-    /// Inserts a new job; returns its id.
-    #[allow(clippy::too_many_arguments)]
-    pub fn insert_job(
-        &mut self,
-        created_ms: u64,
-        settings: &str,
-        render: &str,
-        scene: &str,
-        bundle: &str,
-        total: u64,
-        window: u64,
-        width: u32,
-        height: u32,
-    ) -> Result<u64, StoreError> {
+    /// The id the next job gets: above every id in the database and every job folder.
+    pub fn next_job_id(&self) -> Result<u64, StoreError> {
         let in_db: i64 = self
             .db
             .query_row("SELECT COALESCE(MAX(id), 0) FROM jobs", [], |r| r.get(0))?;
-        let id = (in_db as u64).max(self.id_floor) + 1;
-        self.db.execute(
-            "INSERT INTO jobs (id, created_ms, settings, render, scene, bundle, total, window, next_start, state,
-                               width, height)
-             VALUES (?10, ?1, ?2, ?3, ?4, ?5, ?6, ?7, 0, 'queued', ?8, ?9)",
-            params![
-                created_ms as i64,
-                settings,
-                render,
-                scene,
-                bundle,
-                total as i64,
-                window as i64,
-                width,
-                height,
-                id as i64
-            ],
-        )?;
-        // Its folder now, not at its first batch: folders are what keep ids from being reused
-        // when the database is lost (see `id_floor`), and a job lost with its database before
-        // any batch arrived had none.
-        let folder = self.layout.job_dir(id);
-        std::fs::create_dir_all(&folder).map_err(io(&folder))?;
-        sync_dir(&self.layout.dir.join("jobs"));
-        Ok(id)
+        Ok((in_db as u64).max(self.id_floor) + 1)
+    }
+
+    /// Makes `writes` durable in one transaction (one fsync), in order: one farm event is
+    /// one commit, so a crash keeps all of an event or none of it.
+    pub fn apply(&mut self, writes: &[Write]) -> Result<(), StoreError> {
+        if writes.is_empty() {
+            return Ok(());
+        }
+        let tx = self.db.transaction()?;
+        let mut merged_files = Vec::new();
+        for w in writes {
+            match w {
+                Write::InsertJob(job) => {
+                    tx.execute(
+                        "INSERT INTO jobs (id, created_ms, settings, render, scene, bundle, total, window,
+                                           next_start, state, width, height)
+                         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, 0, 'queued', ?9, ?10)",
+                        params![
+                            job.id as i64,
+                            job.created_ms as i64,
+                            job.settings,
+                            job.render,
+                            job.scene,
+                            job.bundle,
+                            job.total as i64,
+                            job.window as i64,
+                            job.width,
+                            job.height,
+                        ],
+                    )?;
+                    // Its folder now, not at its first batch: folders are what keep ids from
+                    // being reused when the database is lost (see `id_floor`), and a job lost
+                    // with its database before any batch arrived had none.
+                    let folder = self.layout.job_dir(job.id);
+                    std::fs::create_dir_all(&folder).map_err(io(&folder))?;
+                    sync_dir(&self.layout.dir.join("jobs"));
+                }
+                Write::Progress {
+                    id,
+                    next_start,
+                    state,
+                    message,
+                    stats,
+                } => {
+                    tx.execute(
+                        "UPDATE jobs SET next_start = ?2, state = ?3, message = ?4, elapsed_ms = ?5,
+                                         batches_received = ?6, bytes_received = ?7
+                         WHERE id = ?1",
+                        params![
+                            *id as i64,
+                            *next_start as i64,
+                            state.as_str(),
+                            message,
+                            stats.elapsed_ms as i64,
+                            stats.batches_received as i64,
+                            stats.bytes_received as i64
+                        ],
+                    )?;
+                }
+                Write::State {
+                    id,
+                    next_start,
+                    state,
+                    message,
+                } => {
+                    tx.execute(
+                        "UPDATE jobs SET next_start = ?2, state = ?3, message = ?4 WHERE id = ?1",
+                        params![*id as i64, *next_start as i64, state.as_str(), message],
+                    )?;
+                }
+                Write::ImagePasses { id, passes } => {
+                    tx.execute(
+                        "UPDATE jobs SET image_passes = ?2 WHERE id = ?1",
+                        params![*id as i64, *passes as i64],
+                    )?;
+                }
+                Write::InsertLease(lease) => {
+                    tx.execute(
+                        "INSERT OR REPLACE INTO leases (id, job, start, end, worker, key)
+                         VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                        params![
+                            lease.id as i64,
+                            lease.job as i64,
+                            lease.start as i64,
+                            lease.end as i64,
+                            lease.worker,
+                            lease.key
+                        ],
+                    )?;
+                }
+                Write::DeleteLease(id) => {
+                    tx.execute("DELETE FROM leases WHERE id = ?1", params![*id as i64])?;
+                }
+                Write::RecordBatch { job, batch } => {
+                    tx.execute(
+                        "INSERT OR REPLACE INTO batches (job, start, end, lease) VALUES (?1, ?2, ?3, ?4)",
+                        params![
+                            *job as i64,
+                            batch.start as i64,
+                            batch.end as i64,
+                            batch.lease as i64
+                        ],
+                    )?;
+                }
+                Write::ForgetBatch { job, batch } => {
+                    tx.execute(
+                        "DELETE FROM batches WHERE job = ?1 AND start = ?2 AND end = ?3",
+                        params![*job as i64, batch.start as i64, batch.end as i64],
+                    )?;
+                    merged_files.push(self.layout.batch_path(*job, *batch));
+                }
+                Write::ForgetMerged { job, passes } => {
+                    let merged: Vec<StoredBatch> = batch_ranges(&tx, *job)?
+                        .into_iter()
+                        .filter(|b| b.end <= *passes)
+                        .collect();
+                    tx.execute(
+                        "DELETE FROM batches WHERE job = ?1 AND end <= ?2",
+                        params![*job as i64, *passes as i64],
+                    )?;
+                    merged_files.extend(merged.into_iter().map(|b| self.layout.batch_path(*job, b)));
+                }
+                Write::Noise { job, points } => {
+                    for &(passes, v) in points {
+                        tx.execute(
+                            "INSERT OR REPLACE INTO noise (job, passes, variance) VALUES (?1, ?2, ?3)",
+                            params![*job as i64, passes as i64, v],
+                        )?;
+                    }
+                }
+            }
+        }
+        tx.commit()?;
+        // Files of forgotten batches go once no row names them; a crash before this leaves
+        // only unnamed files, which nothing reads.
+        for f in merged_files {
+            let _ = std::fs::remove_file(f);
+        }
+        Ok(())
+    }
+
+    /// Transactions committed since the store was opened (each farm event makes one).
+    pub fn commits(&self) -> u64 {
+        self.commits.load(Ordering::Relaxed)
     }
 
     /// Records how far the counter went and the state.
@@ -445,50 +660,18 @@ impl Store {
         state: JobState,
         message: Option<&str>,
     ) -> Result<(), StoreError> {
-        self.db.execute(
-            "UPDATE jobs SET next_start = ?2, state = ?3, message = ?4 WHERE id = ?1",
-            params![id as i64, next_start as i64, state.as_str(), message],
-        )?;
-        Ok(())
-    }
-
-    /// Records a job's counters.
-    pub fn set_stats(&mut self, id: u64, stats: JobStats) -> Result<(), StoreError> {
-        self.db.execute(
-            "UPDATE jobs SET elapsed_ms = ?2, batches_received = ?3, bytes_received = ?4 WHERE id = ?1",
-            params![
-                id as i64,
-                stats.elapsed_ms as i64,
-                stats.batches_received as i64,
-                stats.bytes_received as i64
-            ],
-        )?;
-        Ok(())
-    }
-
-    /// Records a granted lease.
-    pub fn insert_lease(&mut self, lease: &LeaseRow) -> Result<(), StoreError> {
-        self.db.execute(
-            "INSERT OR REPLACE INTO leases (id, job, start, end, worker, key) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-            params![
-                lease.id as i64,
-                lease.job as i64,
-                lease.start as i64,
-                lease.end as i64,
-                lease.worker,
-                lease.key
-            ],
-        )?;
-        Ok(())
+        self.apply(&[Write::State {
+            id,
+            next_start,
+            state,
+            message: message.map(str::to_string),
+        }])
     }
 
     /// Forgets leases that ended (completed, released, expired, or of a job that is over).
     pub fn delete_leases(&mut self, ids: &[u64]) -> Result<(), StoreError> {
-        for id in ids {
-            self.db
-                .execute("DELETE FROM leases WHERE id = ?1", params![*id as i64])?;
-        }
-        Ok(())
+        let writes: Vec<Write> = ids.iter().map(|&id| Write::DeleteLease(id)).collect();
+        self.apply(&writes)
     }
 
     /// Every stored lease.
@@ -507,15 +690,6 @@ impl Store {
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)
-    }
-
-    /// Records the pass count of a job's latest image.
-    pub fn set_image_passes(&mut self, id: u64, passes: u64) -> Result<(), StoreError> {
-        self.db.execute(
-            "UPDATE jobs SET image_passes = ?2 WHERE id = ?1",
-            params![id as i64, passes as i64],
-        )?;
-        Ok(())
     }
 
     /// Every job, oldest first.
@@ -551,16 +725,6 @@ impl Store {
         Ok(rows.collect::<Result<_, _>>()?)
     }
 
-    /// Records a batch result whose file [`Layout::keep_received`] has stored: from
-    /// here on it counts.
-    pub fn record_batch(&mut self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
-        self.db.execute(
-            "INSERT OR REPLACE INTO batches (job, start, end, lease) VALUES (?1, ?2, ?3, ?4)",
-            params![job as i64, b.start as i64, b.end as i64, b.lease as i64],
-        )?;
-        Ok(())
-    }
-
     /// Whether a row names this batch (its result counted).
     pub fn has_batch(&self, job: u64, b: StoredBatch) -> Result<bool, StoreError> {
         Ok(self
@@ -571,42 +735,12 @@ impl Store {
 
     /// The batch results stored for a job and not yet merged into its prefix.
     pub fn batch_ranges(&self, job: u64) -> Result<Vec<StoredBatch>, StoreError> {
-        let mut stmt = self
-            .db
-            .prepare("SELECT start, end, lease FROM batches WHERE job = ?1 ORDER BY start")?;
-        let ranges = stmt
-            .query_map(params![job as i64], |r| {
-                Ok(StoredBatch {
-                    start: r.get::<_, i64>(0)? as u64,
-                    end: r.get::<_, i64>(1)? as u64,
-                    lease: r.get::<_, i64>(2)? as u64,
-                })
-            })?
-            .collect::<Result<_, _>>()?;
-        Ok(ranges)
+        batch_ranges(&self.db, job)
     }
 
-    /// Forgets a batch (merged into a stored prefix, or found damaged) and removes its file.
-    pub fn forget_batch(&mut self, job: u64, b: StoredBatch) -> Result<(), StoreError> {
-        self.db.execute(
-            "DELETE FROM batches WHERE job = ?1 AND start = ?2 AND end = ?3",
-            params![job as i64, b.start as i64, b.end as i64],
-        )?;
-        let _ = std::fs::remove_file(self.layout.batch_path(job, b));
-        Ok(())
-    }
-
-    /// Stores noise estimates (passes, variance) of a job, in one transaction.
-    pub fn save_noise(&mut self, job: u64, points: &[(u64, f64)]) -> Result<(), StoreError> {
-        let tx = self.db.transaction()?;
-        for &(passes, v) in points {
-            tx.execute(
-                "INSERT OR REPLACE INTO noise (job, passes, variance) VALUES (?1, ?2, ?3)",
-                params![job as i64, passes as i64, v],
-            )?;
-        }
-        tx.commit()?;
-        Ok(())
+    /// Forgets a batch found damaged, and removes its file.
+    pub fn forget_batch(&mut self, job: u64, batch: StoredBatch) -> Result<(), StoreError> {
+        self.apply(&[Write::ForgetBatch { job, batch }])
     }
 
     /// A job's stored noise estimates, by passes.
@@ -621,19 +755,20 @@ impl Store {
             .collect::<Result<_, _>>()?;
         Ok(points)
     }
+}
 
-    /// Forgets the batches a stored prefix of `passes` passes contains.
-    pub fn forget_merged(&mut self, job: u64, passes: u64) -> Result<(), StoreError> {
-        let merged: Vec<StoredBatch> = self
-            .batch_ranges(job)?
-            .into_iter()
-            .filter(|b| b.end <= passes)
-            .collect();
-        for b in merged {
-            self.forget_batch(job, b)?;
-        }
-        Ok(())
-    }
+fn batch_ranges(db: &Connection, job: u64) -> Result<Vec<StoredBatch>, StoreError> {
+    let mut stmt = db.prepare("SELECT start, end, lease FROM batches WHERE job = ?1 ORDER BY start")?;
+    let ranges = stmt
+        .query_map(params![job as i64], |r| {
+            Ok(StoredBatch {
+                start: r.get::<_, i64>(0)? as u64,
+                end: r.get::<_, i64>(1)? as u64,
+                lease: r.get::<_, i64>(2)? as u64,
+            })
+        })?
+        .collect::<Result<_, _>>()?;
+    Ok(ranges)
 }
 
 #[cfg(test)]
@@ -662,7 +797,23 @@ mod tests {
     fn job_ids_are_not_reused_after_the_database_is_lost() {
         let dir = tempfile::tempdir().unwrap();
         let mut store = Store::open(dir.path()).unwrap();
-        let insert = |s: &mut Store| s.insert_job(0, "{}", "{}", "s.xml", "b", 4, 4, 2, 2).unwrap();
+        let insert = |s: &mut Store| {
+            let id = s.next_job_id().unwrap();
+            let job = NewJob {
+                id,
+                created_ms: 0,
+                settings: "{}".into(),
+                render: "{}".into(),
+                scene: "s.xml".into(),
+                bundle: "b".into(),
+                total: 4,
+                window: 4,
+                width: 2,
+                height: 2,
+            };
+            s.apply(&[Write::InsertJob(job)]).unwrap();
+            id
+        };
         assert_eq!(insert(&mut store), 1);
         drop(store);
         for f in [
