@@ -289,7 +289,8 @@ impl Scheduler {
                 continue;
             }
             let target = target_ms(&config, clients, job.pixels);
-            let size = batch_size(&config, target, job.rates.get(worker).copied(), renderers);
+            let size = batch_size(&config, target, job.rates.get(worker).copied(), renderers)
+                .min(fair_share(job, worker, self.seen.keys()));
             let Some(range) = take_free(job, worker, size).or_else(|| take_new(job, size)) else {
                 fail_if_barred_everywhere(job, self.seen.keys());
                 continue;
@@ -581,6 +582,22 @@ fn batch_size(config: &SchedulerConfig, target_ms: Millis, rate: Option<f64>, re
         None => (renderers as u64).clamp(1, config.max_batch),
         Some(r) => ((r * target_ms as f64) as u64).clamp(1, config.max_batch),
     }
+}
+
+/// Guided self-scheduling: a batch is at most the worker's share of the passes not yet handed
+/// out, in proportion to its rate among the workers present (those without a rate on the job
+/// count as fast as this one). Batches so shrink as a job nears its end, and the workers finish
+/// together instead of one rendering the last long batch while the others wait.
+fn fair_share<'a>(job: &JobSched, worker: &str, present: impl Iterator<Item = &'a String>) -> u64 {
+    let Some(&mine) = job.rates.get(worker) else {
+        return u64::MAX;
+    };
+    let left = (job.total - job.next_start) + job.free.iter().map(|(s, e)| e - s).sum::<u64>();
+    let all: f64 = present.map(|w| job.rates.get(w).copied().unwrap_or(mine)).sum();
+    if all <= 0.0 || mine <= 0.0 {
+        return u64::MAX;
+    }
+    ((left as f64 * mine / all).ceil() as u64).max(1)
 }
 
 /// Splits [a, b) at window boundaries into the free set.
@@ -896,6 +913,29 @@ mod tests {
         }
         let g = s.lease("relay", 13_000).unwrap();
         assert_eq!(g.end - g.start, 20);
+    }
+
+    #[test]
+    fn batches_shrink_near_the_end_so_workers_finish_together() {
+        let mut s = sched();
+        s.add_job(1, 100, 100, 0, &[], JobState::Queued);
+        // Both workers measured at one pass per millisecond: 100 ms batches of 100 passes
+        // would be the whole job, but each takes half of what is left.
+        for w in ["a", "b"] {
+            let g = s.lease(w, 0).unwrap();
+            s.complete(g.lease_id, 1).unwrap();
+        }
+        let mut sizes = Vec::new();
+        let mut now = 1;
+        while let Some(g) = s.lease(if sizes.len() % 2 == 0 { "a" } else { "b" }, now) {
+            // Each batch takes its size in milliseconds: the rates stay one pass per ms.
+            sizes.push(g.end - g.start);
+            now += g.end - g.start;
+            s.complete(g.lease_id, now).unwrap();
+        }
+        assert_eq!(sizes.iter().sum::<u64>(), 98);
+        assert_eq!(sizes, [49, 25, 12, 6, 3, 2, 1]);
+        assert_eq!(s.status(1).unwrap().0, JobState::Done);
     }
 
     #[test]
