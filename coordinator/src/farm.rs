@@ -215,6 +215,9 @@ pub struct Expected {
 pub struct SharedFarm {
     farm: Mutex<Farm>,
     store: Mutex<Store>,
+    /// Woken when an event makes passes available (a submission, a release, an expiry), for
+    /// lease requests that wait for work instead of polling.
+    work: tokio::sync::Notify,
 }
 
 fn locked<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -228,6 +231,7 @@ impl SharedFarm {
         Ok(SharedFarm {
             farm: Mutex::new(farm),
             store: Mutex::new(store),
+            work: tokio::sync::Notify::new(),
         })
     }
 
@@ -238,13 +242,24 @@ impl SharedFarm {
         let mut farm = locked(&self.farm);
         let out = event(&mut farm);
         let writes = std::mem::take(&mut farm.writes);
+        let new_work = std::mem::take(&mut farm.new_work);
         if writes.is_empty() {
             return out;
         }
         let mut store = locked(&self.store);
         drop(farm);
         store.apply(&writes)?;
+        drop(store);
+        if new_work {
+            self.work.notify_waiters();
+        }
         out
+    }
+
+    /// Completes when an event after this call makes passes available. Create it before
+    /// asking for a lease, so that work arriving in between is not missed.
+    pub fn new_work(&self) -> tokio::sync::futures::Notified<'_> {
+        self.work.notified()
     }
 
     /// Reads the farm (no event: nothing to write).
@@ -263,6 +278,8 @@ pub struct Farm {
     layout: Layout,
     /// Writes the current event made, for [`SharedFarm::run`] to commit.
     writes: Vec<Write>,
+    /// Whether the current event made passes available (to wake waiting lease requests).
+    new_work: bool,
     /// The next job's id.
     next_job: u64,
     scheduler: Scheduler,
@@ -371,6 +388,7 @@ impl Farm {
         Ok(Farm {
             layout: store.layout().clone(),
             writes: Vec::new(),
+            new_work: false,
             next_job: store.next_job_id()?,
             scheduler,
             jobs,
@@ -432,6 +450,7 @@ impl Farm {
         }));
         self.scheduler
             .add_job(id, total, window, 0, &[], JobState::Queued);
+        self.new_work = true;
         self.scheduler.set_pixels(id, width as u64 * height as u64);
         self.saved.insert(id, (JobState::Queued, 0, None));
         let row = JobRow {
@@ -560,6 +579,7 @@ impl Farm {
     /// worker.
     pub fn reject(&mut self, lease_id: u64, why: &str) -> Result<(), FarmError> {
         self.scheduler.release(lease_id, Some(why))?;
+        self.new_work = true;
         self.forget_lease(lease_id)?;
         self.save_changes()
     }
@@ -639,6 +659,7 @@ impl Farm {
     pub fn release(&mut self, lease_id: u64, key: &str, error: Option<&str>) -> Result<(), FarmError> {
         self.check_key(lease_id, key)?;
         self.scheduler.release(lease_id, error)?;
+        self.new_work = true;
         self.forget_lease(lease_id)?;
         // Also after the lease's deadline, before the expiry tick: the failure it may cause
         // is saved like any other (it once stayed in memory, and a restart revived the job).
@@ -649,6 +670,7 @@ impl Farm {
     /// failure of the worker that held it).
     pub fn expire(&mut self) -> Result<usize, FarmError> {
         let expired = self.scheduler.expire(self.now());
+        self.new_work |= !expired.is_empty();
         for &(lease, job) in &expired {
             tracing::warn!(
                 lease,
@@ -1153,7 +1175,9 @@ mod tests {
         let held = || lease.borrow().clone().unwrap();
         assert_eq!(take(), 1, "a lease");
         assert_eq!(held().job_id, job.get());
-        let beat = commits_of(&|f| drop(f.heartbeat(held().lease_id, &held().key).unwrap()));
+        let beat = commits_of(&|f| {
+            f.heartbeat(held().lease_id, &held().key).unwrap();
+        });
         assert_eq!(beat, 0, "a heartbeat writes nothing");
         let result = commits_of(&|f| drop(f.commit(held().lease_id, &held().key, 1).unwrap()));
         assert_eq!(result, 1, "a result");

@@ -58,6 +58,7 @@ pub async fn run(
         receiving: Default::default(),
         scene_checks: Semaphore::new(admission.max_scene_checks.max(1)),
         metrics: Default::default(),
+        stopping: tokio::sync::watch::Sender::new(false),
     });
     // Leases without heartbeats expire; check several times per timeout.
     let period = Duration::from_millis((config.farm.scheduler.lease_timeout_ms / 10).clamp(10, 1000));
@@ -85,6 +86,12 @@ pub async fn run(
     );
     // On standard output, for scripts (and tests) that bind port 0.
     println!("listening on http://{addr}");
+    // Lease requests waiting for work answer at once when the service stops.
+    let stopping = state.clone();
+    let shutdown = async move {
+        shutdown.await;
+        stopping.stopping.send_replace(true);
+    };
     crate::serving::serve(listener, router(state), admission.serving, shutdown).await?;
     expiry.abort();
     Ok(())

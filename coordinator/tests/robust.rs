@@ -649,3 +649,63 @@ async fn a_storage_failure_is_a_500_without_details() {
     );
     assert_eq!(api.get("/api/jobs").await.0, StatusCode::OK);
 }
+
+/// `POST /api/lease?wait_ms=N`: with no work, 204 after the wait; a request waiting when a job
+/// is submitted gets the job's first batch then, not after its wait; and a waiting request is
+/// answered at once when the coordinator stops (SIGTERM), so waits never hold up a shutdown.
+#[tokio::test]
+async fn a_waiting_lease_request_gets_the_job_submitted_meanwhile() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut serve, url) = serve(dir.path(), "127.0.0.1:0", &[]);
+    let ask = |wait_ms: u64| {
+        let api = Api::new(&url);
+        async move {
+            let started = Instant::now();
+            let body = br#"{"worker": "w", "threads": 1}"#.to_vec();
+            let path = format!("/api/lease?wait_ms={wait_ms}");
+            let (s, v) = api
+                .call(reqwest::Method::POST, &path, WORKER_TOKEN, "", body)
+                .await;
+            (s, v, started.elapsed())
+        }
+    };
+    let (s, _, took) = ask(300).await;
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    assert!(took >= Duration::from_millis(300), "answered after {took:?}");
+
+    let waiting = tokio::spawn(ask(5_000));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let api = Api::new(&url);
+    let bundle = tar_of(&[("s.xml", &scene("", 8, 8))]);
+    let (s, v) = api.submit(bundle, r#"{"passes": 2}"#).await;
+    assert_eq!(s, StatusCode::CREATED, "{v}");
+    let (s, lease, took) = waiting.await.unwrap();
+    assert_eq!(s, StatusCode::OK, "{lease}");
+    assert_eq!(lease["job_id"], v["id"]);
+    // Woken by the submission: not at the end of its 5 s wait.
+    assert!(took < Duration::from_millis(4_000), "answered after {took:?}");
+
+    // The job's other pass goes to a second worker (first batches are one pass); a third
+    // request then waits...
+    let body = br#"{"worker": "v", "threads": 1}"#.to_vec();
+    let (s, _) = api
+        .call(reqwest::Method::POST, "/api/lease", WORKER_TOKEN, "", body)
+        .await;
+    assert_eq!(s, StatusCode::OK);
+    let waiting = tokio::spawn(ask(5_000));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    // ...and is answered when the coordinator is told to stop.
+    let pid = serve.0.id().to_string();
+    assert!(
+        std::process::Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let (s, _, took) = waiting.await.unwrap();
+    assert_eq!(s, StatusCode::NO_CONTENT);
+    assert!(took < Duration::from_millis(4_000), "answered after {took:?}");
+    let exit = serve.0.wait().unwrap();
+    assert!(exit.success(), "{exit:?}");
+}

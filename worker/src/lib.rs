@@ -106,13 +106,26 @@ pub async fn run(
         deliver(&client, &outbox, &parcel, bytes, &mut trouble, &mut stop_rx).await?;
     }
     while !*stop_rx.borrow() {
-        let lease = match request_lease(&client, &config).await {
+        let asked = std::time::Instant::now();
+        let answer = tokio::select! {
+            answer = request_lease(&client, &config) => answer,
+            // Stop at once, not at the end of a request waiting for work.
+            _ = stop_rx.changed() => continue,
+        };
+        let lease = match answer {
             Ok(Some(lease)) => {
                 trouble.cleared(&client.base);
                 backoff = Duration::from_millis(200);
                 lease
             }
+            Ok(None) if asked.elapsed() >= LEASE_WAIT / 2 => {
+                // The coordinator waited for work and none came: ask again at once.
+                trouble.cleared(&client.base);
+                backoff = Duration::from_millis(200);
+                continue;
+            }
             Ok(None) => {
+                // An answer at once: a coordinator that does not wait for work. Poll.
                 trouble.cleared(&client.base);
                 tokio::select! {
                     _ = tokio::time::sleep(backoff) => {}
@@ -248,6 +261,10 @@ fn coordinator_url(given: &str) -> anyhow::Result<String> {
     Ok(given.trim_end_matches('/').to_string())
 }
 
+/// How long a lease request asks the coordinator to wait for work before answering that there
+/// is none: a new job starts on every idle worker at once, not at their next polls.
+const LEASE_WAIT: Duration = Duration::from_secs(5);
+
 async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<Lease>, RequestError> {
     let req = LeaseRequest {
         worker: config.name.clone(),
@@ -255,7 +272,10 @@ async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<
         renderers: None,
     };
     let resp = client
-        .req(reqwest::Method::POST, "/api/lease")
+        .req(
+            reqwest::Method::POST,
+            &format!("/api/lease?wait_ms={}", LEASE_WAIT.as_millis()),
+        )
         .json(&req)
         .send()
         .await
