@@ -12,6 +12,7 @@ pub mod compression;
 pub mod engine;
 pub mod film;
 pub mod filter;
+pub mod frames;
 pub mod geometry;
 pub mod integrator;
 pub mod job;

@@ -47,7 +47,7 @@ const SOBOL_POINTS: u64 = 1 << 32;
 const SOBOL_DIMENSIONS: u32 = crate::sobol::DIMENSION_SETS * 4;
 
 /// SplitMix64's finaliser: a bijective mix, so distinct keys never share a state.
-fn mix64(mut z: u64) -> u64 {
+pub fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)

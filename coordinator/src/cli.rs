@@ -299,9 +299,18 @@ pub struct RenderArgs {
     /// What to render.
     #[command(flatten)]
     pub job: JobArgs,
-    /// Output image: .exr (linear 32-bit float) or .png (sRGB, 8-bit).
+    /// Output image: .exr (linear 32-bit float) or .png (sRGB, 8-bit). With --frames, each run
+    /// of `#` in the file name is the frame number padded with zeros (`shots/cbox-####.exr`);
+    /// a name without `#` gets the number, four digits, before its extension (as Blender does).
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Render a sequence: the frames in Flamenco's syntax (`1-240`, `1-100x2,150`). Each frame
+    /// sets the scene parameter `frame` (`$frame`; a scene need not use it) and has its own
+    /// seed, derived from --seed and the frame; each `-D name=A:B` runs linearly from A at the
+    /// first frame to B at the last. --time-limit applies to each frame, and --resume goes on
+    /// from the first unfinished frame.
+    #[arg(long, value_name = "LIST")]
+    pub frames: Option<String>,
     /// Stop after this many seconds, at the end of the batch under way.
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub time_limit: Option<f64>,

@@ -5,10 +5,14 @@
 //! checkpoints fall on the same pass counts.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use photonfarm::film::FilmSum;
+use photonfarm::frames::{frame_defines, frame_path, frame_seed, parse_frames};
+use photonfarm::job::JobSettings;
 use photonfarm::render::{Method, Renderer};
 use photonfarm::scene::Scene;
 
@@ -18,7 +22,7 @@ use crate::progress::Reporter;
 use crate::resume;
 use crate::scheduler::{JobState, Scheduler, SchedulerConfig};
 
-/// Renders `args.job.scene` to `args.out`.
+/// Renders `args.job.scene` to `args.out`, or each frame of `args.frames` to its name.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     // Check everything cheap first: a typo must not cost a long render.
     check_output(&args.out)?;
@@ -35,6 +39,54 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         bail!("--save-every must be a positive number of seconds, not {save_every}");
     }
     let settings = args.job.settings()?;
+    let interrupted = interruption_flag();
+    let Some(spec) = &args.frames else {
+        return render_image(args, &settings, &args.out, args.resume, &interrupted);
+    };
+    let frames = parse_frames(spec)?;
+    // Every frame's parameters first: a bad ramp fails before the first frame renders.
+    let plans = frames
+        .iter()
+        .map(|&frame| {
+            let mut s = settings.clone();
+            s.defines = frame_defines(&settings.defines, &frames, frame)?;
+            s.seed = frame_seed(settings.seed, frame);
+            Ok((frame, frame_path(&args.out, frame), s))
+        })
+        .collect::<Result<Vec<_>, photonfarm::frames::FrameError>>()?;
+    for (i, (frame, out, frame_settings)) in plans.iter().enumerate() {
+        // --resume goes on from the first frame not finished: a finished frame has its image
+        // and no sums beside it.
+        let sums = resume::path_for(out);
+        let done = args.resume && out.exists() && !sums.exists();
+        let of = frames.len();
+        eprintln!(
+            "frame {frame} ({} of {of}): {}{}",
+            i + 1,
+            out.display(),
+            if done { " is done" } else { "" }
+        );
+        if !done {
+            render_image(
+                args,
+                frame_settings,
+                out,
+                args.resume && sums.exists(),
+                &interrupted,
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Renders one image (a still, or one frame of a sequence) to `out`.
+fn render_image(
+    args: &RenderArgs,
+    settings: &JobSettings,
+    out: &Path,
+    resume: bool,
+    interrupted: &Arc<AtomicBool>,
+) -> anyhow::Result<()> {
     let scene = Scene::load(&args.job.scene, &settings.defines)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
@@ -95,8 +147,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let total = resolved.passes.unwrap_or(u64::MAX);
     let window = settings.checkpoint_every.unwrap_or(1 << 40);
     let fingerprint = resume::fingerprint(&args.job.scene, &scene, &settings.defines, &resolved.render)?;
-    let sums_path = resume::path_for(&args.out);
-    let prefix = if args.resume {
+    let sums_path = resume::path_for(out);
+    let prefix = if resume {
         let sum = resume::load(&sums_path, &fingerprint, scene.width(), scene.height())?;
         eprintln!(
             "resuming from {} ({} {unit} done)",
@@ -125,7 +177,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     scheduler.add_job(0, total, window, done, &[(0, done)], JobState::Queued);
     // A local render follows no noise estimate (no odd-pass sample).
     let mut acc = Accumulator::new(prefix, None, window);
-    let save_every = Duration::from_secs_f64(save_every);
+    let save_every = Duration::from_secs_f64(args.save_every.unwrap_or(30.0));
     let mut saved = Instant::now();
     let mut save_error = None;
     let start = Instant::now();
@@ -133,10 +185,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let mut reporter = Reporter::new(resolved.passes, unit);
     let mut checkpoint_error = None;
     let now = || start.elapsed().as_millis() as u64;
-    let interrupted = interruption_flag();
     let mut renderer = Renderer::new(&scene, &resolved.render);
     loop {
-        let stop = interrupted.load(std::sync::atomic::Ordering::Relaxed);
+        let stop = interrupted.load(Ordering::Relaxed);
         if stop || limit.is_some_and(|l| start.elapsed() >= l) {
             scheduler.close(0);
         }
@@ -144,7 +195,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             break;
         };
         // SPPM's radii from the settings' schedule, as the coordinator sends them to workers.
-        let sum = pool.install(|| renderer.render(grant.start..grant.end, None, &interrupted).sum);
+        let sum = pool.install(|| renderer.render(grant.start..grant.end, None, interrupted).sum);
         if sum.passes == 0 {
             // Interrupted before the batch's first pass; the loop closes the job.
             continue;
@@ -163,7 +214,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         for cp in checkpoints {
             if cp.passes < total
                 && checkpoint_error.is_none()
-                && let Err(e) = cp.write(&checkpoint_path(&args.out, cp.passes))
+                && let Err(e) = cp.write(&checkpoint_path(out, cp.passes))
             {
                 // Keep rendering: the final image may still be written.
                 checkpoint_error = Some(e.to_string());
@@ -191,7 +242,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     if let Some(e) = save_error {
         eprintln!("warning: the sums for --resume were not saved: {e}");
     }
-    film.write(&args.out)?;
+    film.write(out)?;
     // A render that reached its pass count needs no sums; one that stopped early keeps them for
     // --resume.
     let finished = film.passes >= total;
@@ -205,20 +256,20 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .is_some_and(|n| film.passes.is_multiple_of(n))
     {
         // The last checkpoint is the final image.
-        let _ = std::fs::copy(&args.out, checkpoint_path(&args.out, film.passes));
+        let _ = std::fs::copy(out, checkpoint_path(out, film.passes));
     }
     eprintln!(
         "wrote {} ({} {unit} in {:.1} s)",
-        args.out.display(),
+        out.display(),
         film.passes,
         start.elapsed().as_secs_f64()
     );
-    if interrupted.load(std::sync::atomic::Ordering::Relaxed) {
+    if interrupted.load(Ordering::Relaxed) {
         let of = resolved.passes.map(|n| format!(" of {n}")).unwrap_or_default();
         bail!(
             "interrupted: {} wholly holds the {} finished {unit}{of}; the same command with \
              --resume continues from them",
-            args.out.display(),
+            out.display(),
             film.passes
         );
     }
@@ -235,8 +286,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 /// Set on ctrl-c or SIGTERM: the render stops after the batch under way (at most about half a
 /// second of work) and writes the image of every finished pass, so an interruption keeps the
 /// work done.
-fn interruption_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
-    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+fn interruption_flag() -> Arc<AtomicBool> {
+    let flag = Arc::new(AtomicBool::new(false));
     let set = flag.clone();
     std::thread::spawn(move || {
         let Ok(rt) = tokio::runtime::Builder::new_current_thread().enable_all().build() else {
@@ -244,7 +295,7 @@ fn interruption_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
         };
         rt.block_on(photonfarm::process::shutdown_signal());
         eprintln!("\ninterrupted: finishing the pass under way, then writing the image");
-        set.store(true, std::sync::atomic::Ordering::Relaxed);
+        set.store(true, Ordering::Relaxed);
     });
     flag
 }

@@ -453,3 +453,93 @@ fn resume_after_sigkill_gives_the_uninterrupted_bytes() {
         "the resumed render (killed after {done} passes) is not the uninterrupted one"
     );
 }
+
+/// `--frames` renders a sequence: one file per frame under Blender's `#` padding, each frame
+/// with its ramped parameters and its own seed. A frame rendered alone (a one-frame list, the
+/// ramp's value at that frame) has the bytes of the same frame in the sequence; `--resume`
+/// skips the frames that are done; a bad list fails before anything renders.
+#[test]
+fn a_frame_sequence_ramps_parameters_and_each_frame_renders_alone_to_the_same_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/turntable.xml");
+    let scene = scene.to_str().unwrap();
+    let render = |frames: &str, angle: &str, out: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let mut args = vec![
+            "render",
+            scene,
+            "--frames",
+            frames,
+            "--out",
+            out.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--seed",
+            "9",
+            "-D",
+            "res=24",
+            "-D",
+            angle,
+            "-D",
+            "roll=-0.5:0.4",
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let o = render("1-3", "angle=-20:20", "seq-##.exr", &[]);
+    assert!(o.status.success());
+    let frame = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
+    let seq: Vec<Vec<u8>> = ["seq-01.exr", "seq-02.exr", "seq-03.exr"].map(frame).to_vec();
+    assert!(
+        seq[0] != seq[1] && seq[1] != seq[2],
+        "the frames are not animated"
+    );
+    // Frame 2 alone: angle and roll at their midpoints (0 and -0.05), the sequence's seed.
+    let alone = |angle: &str, roll: &str| {
+        let out = dir.path().join("alone.exr");
+        let o = run(&[
+            "render",
+            scene,
+            "--frames",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+            "--spp",
+            "2",
+            "--seed",
+            "9",
+            "-D",
+            "res=24",
+            "-D",
+            angle,
+            "-D",
+            roll,
+        ]);
+        assert!(o.status.success());
+        std::fs::read(dir.path().join("alone0002.exr")).unwrap()
+    };
+    assert!(
+        alone("angle=0", "roll=-0.05") == seq[1],
+        "frame 2 alone differs from the sequence's"
+    );
+    assert!(
+        alone("angle=1", "roll=-0.05") != seq[1],
+        "the angle changes nothing"
+    );
+    // --resume: every frame is done, so nothing renders again.
+    let o = render("1-3", "angle=-20:20", "seq-##.exr", &["--resume"]);
+    assert!(o.status.success());
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(log.matches("is done").count(), 3, "{log}");
+    // Errors before any rendering.
+    for (frames, angle, why) in [
+        ("3-1", "angle=0", "runs backwards"),
+        ("1-3", "angle=0:x", "two numbers"),
+    ] {
+        let o = render(frames, angle, "bad-#.exr", &[]);
+        assert!(!o.status.success());
+        let log = String::from_utf8_lossy(&o.stderr);
+        assert!(log.contains(why), "{log}");
+        assert!(!log.contains("rendering"), "{log}");
+    }
+}

@@ -79,7 +79,8 @@ pub(crate) fn parse(file: &Path, text: &str, defines: &[(String, String)]) -> Re
     let mut unused: Vec<String> = reader
         .used
         .iter()
-        .filter(|(_, used)| !**used)
+        // A sequence sets `frame` on every frame; a scene that does not animate ignores it.
+        .filter(|(k, used)| !**used && k.as_str() != crate::frames::FRAME_PARAMETER)
         .map(|(k, _)| format!("{k}={}", reader.params[k]))
         .collect();
     if !unused.is_empty() {
