@@ -12,6 +12,116 @@ use crate::parity::{OddSums, sample_len};
 use crate::render::RenderSettings;
 
 mod bounded;
+#[cfg(feature = "http")]
+mod endpoint;
+pub mod routes;
+
+#[cfg(feature = "http")]
+pub use endpoint::Endpoint;
+
+/// A job's lifecycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Accepted, nothing rendered yet.
+    Queued,
+    /// Some passes rendered.
+    Running,
+    /// Every pass rendered.
+    Done,
+    /// A batch failed on too many workers.
+    Failed,
+    /// Cancelled by a user.
+    Cancelled,
+}
+
+impl JobState {
+    /// Whether the job will never change again.
+    pub fn is_final(self) -> bool {
+        matches!(self, JobState::Done | JobState::Failed | JobState::Cancelled)
+    }
+
+    /// The name used in the API and the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Done => "done",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    /// Parses [`JobState::as_str`].
+    pub fn parse(s: &str) -> Option<JobState> {
+        [
+            JobState::Queued,
+            JobState::Running,
+            JobState::Done,
+            JobState::Failed,
+            JobState::Cancelled,
+        ]
+        .into_iter()
+        .find(|j| j.as_str() == s)
+    }
+}
+
+/// What `GET /api/jobs/{id}` answers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JobStatus {
+    /// Job id.
+    pub id: u64,
+    /// queued, running, done, failed or cancelled.
+    pub state: JobState,
+    /// Passes (iterations or samples per pixel) rendered and received.
+    pub iterations_done: u64,
+    /// Passes asked for.
+    pub iterations_total: u64,
+    /// Passes in the latest checkpoint image.
+    pub checkpoint_iterations: u64,
+    /// Workers holding a batch of this job now.
+    pub workers: Vec<String>,
+    /// Workers that asked the coordinator for work recently, on any job: 0 says why a queued
+    /// job does not start.
+    pub workers_present: usize,
+    /// Seconds a coordinator spent on the job since its first batch was handed out (time
+    /// while the coordinator was down does not count; restarts do not reset it).
+    pub elapsed_seconds: f64,
+    /// Passes per second over that time.
+    pub rate: f64,
+    /// `path` or `sppm`.
+    pub integrator: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Why the job failed, if it did.
+    pub message: Option<String>,
+    /// When the job was submitted, Unix milliseconds.
+    pub created_unix_ms: u64,
+    /// Batch results received (across coordinator restarts).
+    pub batches_received: u64,
+    /// Bytes of batch results received (across coordinator restarts).
+    pub bytes_received: u64,
+}
+
+/// What `GET /api/jobs` answers.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct JobList {
+    /// Every job, oldest first.
+    pub jobs: Vec<JobStatus>,
+}
+
+/// What `POST /api/jobs` answers: the new job's status and the scene's warnings.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Submitted {
+    /// The job.
+    #[serde(flatten)]
+    pub status: JobStatus,
+    /// What the scene check warned of (unsupported elements rendered as Mitsuba would not).
+    #[serde(default)]
+    pub warnings: Vec<String>,
+}
 
 /// A worker asking for work.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]

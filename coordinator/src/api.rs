@@ -19,7 +19,9 @@ use axum::{Json, Router};
 use photonfarm::bundle::BundleError;
 use photonfarm::compression::{self, CompressionError, Encoding};
 use photonfarm::job::JobSettings;
-use photonfarm::protocol::{LeaseRequest, Release, decode_result, max_encoded_batch};
+use photonfarm::protocol::{
+    JobList, LeaseRequest, Release, Submitted, decode_result, max_encoded_batch, routes,
+};
 use photonfarm::render::Method;
 use serde_json::json;
 use sha2::{Digest, Sha256};
@@ -132,24 +134,24 @@ type ApiResult<T> = Result<T, ApiError>;
 pub fn router(state: Arc<AppState>) -> Router {
     let upload = DefaultBodyLimit::max(state.admission.max_upload as usize);
     let routes = Router::new()
-        .route("/healthz", get(|| async { Json(json!({ "status": "ok" })) }))
-        .route("/metrics", get(metrics))
-        .route("/api/jobs", post(submit).layer(upload).get(list))
-        .route("/api/jobs/{id}", get(status).delete(cancel))
-        .route("/api/jobs/{id}/noise", get(noise))
-        .route("/api/jobs/{id}/{file}", get(image))
-        .route("/api/workers", get(workers))
+        .route(routes::HEALTH, get(|| async { Json(json!({ "status": "ok" })) }))
+        .route(routes::METRICS, get(metrics))
+        .route(routes::JOBS, post(submit).layer(upload).get(list))
+        .route(routes::JOB, get(status).delete(cancel))
+        .route(routes::JOB_NOISE, get(noise))
+        .route(routes::JOB_FILE, get(image))
+        .route(routes::WORKERS, get(workers))
         .merge(crate::web::routes())
-        .route("/api/bundles/{hash}", get(bundle))
-        .route("/api/lease", post(lease).layer(DefaultBodyLimit::max(JSON_LIMIT)))
-        .route("/api/leases/{id}/heartbeat", post(heartbeat))
-        // The lease's expected size is the real limit of a result (checked in the handler).
+        .route(routes::BUNDLE, get(bundle))
         .route(
-            "/api/leases/{id}/result",
-            put(result).layer(DefaultBodyLimit::disable()),
+            routes::LEASE,
+            post(lease).layer(DefaultBodyLimit::max(JSON_LIMIT)),
         )
+        .route(routes::HEARTBEAT, post(heartbeat))
+        // The lease's expected size is the real limit of a result (checked in the handler).
+        .route(routes::RESULT, put(result).layer(DefaultBodyLimit::disable()))
         .route(
-            "/api/leases/{id}/release",
+            routes::RELEASE,
             post(release).layer(DefaultBodyLimit::max(JSON_LIMIT)),
         )
         .fallback(|| async { ApiError::new(StatusCode::NOT_FOUND, "no such endpoint (see docs/api.md)") });
@@ -166,14 +168,12 @@ async fn auth(State(state): State<Arc<AppState>>, headers: HeaderMap, req: Reque
     if crate::web::is_asset(path) {
         return next.run(req).await;
     }
-    let worker_route =
-        path == "/api/lease" || path.starts_with("/api/leases/") || path.starts_with("/api/bundles/");
-    let wanted: Vec<&String> = if path == "/healthz" {
+    let wanted: Vec<&String> = if path == routes::HEALTH {
         [&state.tokens.client, &state.tokens.worker]
             .into_iter()
             .flatten()
             .collect()
-    } else if worker_route {
+    } else if routes::is_workers(path) {
         state.tokens.worker.iter().collect()
     } else {
         state.tokens.client.iter().collect()
@@ -436,8 +436,10 @@ fn accept_bundle(
         Ok((id, farm.status(id).ok_or(FarmError::NoJob(id))?))
     })?;
     tracing::info!(job = id, total, "job accepted");
-    let mut body = serde_json::to_value(status).expect("status serialises");
-    body["warnings"] = json!(checked.warnings);
+    let body = Submitted {
+        status,
+        warnings: checked.warnings,
+    };
     Ok((StatusCode::CREATED, Json(body)).into_response())
 }
 
@@ -478,7 +480,7 @@ async fn workers(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
 
 async fn list(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
     let jobs = with_farm(&state, |f| Ok(f.list()))?;
-    Ok(Json(json!({ "jobs": jobs })).into_response())
+    Ok(Json(JobList { jobs }).into_response())
 }
 
 async fn status(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> ApiResult<Response> {

@@ -4,6 +4,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use photonfarm::protocol::{Endpoint, JobList, JobState, JobStatus, Submitted, routes};
 use photonfarm::scene::Scene;
 use reqwest::multipart::{Form, Part};
 use serde_json::Value;
@@ -14,18 +15,14 @@ use crate::render_command::check_output;
 
 /// An authenticated client of one coordinator.
 pub struct ApiClient {
-    base: String,
-    token: Option<String>,
-    http: reqwest::Client,
+    endpoint: Endpoint,
 }
 
 impl ApiClient {
     /// A client of the coordinator at `base` (e.g. `http://127.0.0.1:8080`).
     pub fn new(base: &str, token: Option<String>) -> ApiClient {
         ApiClient {
-            base: base.trim_end_matches('/').to_string(),
-            token,
-            http: reqwest::Client::new(),
+            endpoint: Endpoint::new(base, token, reqwest::Client::new()),
         }
     }
 
@@ -33,18 +30,7 @@ impl ApiClient {
     /// error if `--to` is not an http:// or https:// address.
     pub fn for_connection(conn: &crate::cli::ConnectionArgs) -> anyhow::Result<ApiClient> {
         check_address(&conn.to)?;
-        Ok(ApiClient::new(
-            &conn.to,
-            conn.token.clone().filter(|t| !t.is_empty()),
-        ))
-    }
-
-    fn req(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
-        let r = self.http.request(method, format!("{}{path}", self.base));
-        match &self.token {
-            Some(t) => r.bearer_auth(t),
-            None => r,
-        }
+        Ok(ApiClient::new(&conn.to, conn.token.clone()))
     }
 
     /// Sends a request; a non-success status becomes an error with the API's message.
@@ -52,7 +38,7 @@ impl ApiClient {
         let resp = r
             .send()
             .await
-            .with_context(|| format!("cannot reach the coordinator at {}", self.base))?;
+            .with_context(|| format!("cannot reach the coordinator at {}", self.endpoint.base()))?;
         if resp.status().is_success() {
             return Ok(resp);
         }
@@ -65,47 +51,51 @@ impl ApiClient {
         bail!("{status}: {msg}")
     }
 
-    /// Submits a bundle; returns the job's status JSON.
+    /// Submits a bundle; returns the job's status and the scene's warnings.
     pub async fn submit(
         &self,
         bundle: Vec<u8>,
         scene: &str,
         settings: &photonfarm::job::JobSettings,
-    ) -> anyhow::Result<Value> {
+    ) -> anyhow::Result<Submitted> {
         let form = Form::new()
             .part("bundle", Part::bytes(bundle).file_name("bundle.tar"))
             .text("scene", scene.to_string())
             .text("settings", serde_json::to_string(settings)?);
         Ok(self
-            .send(self.req(reqwest::Method::POST, "/api/jobs").multipart(form))
+            .send(
+                self.endpoint
+                    .request(reqwest::Method::POST, routes::JOBS)
+                    .multipart(form),
+            )
             .await?
             .json()
             .await?)
     }
 
-    /// A job's status JSON.
-    pub async fn status(&self, id: u64) -> anyhow::Result<Value> {
+    /// A job's status.
+    pub async fn status(&self, id: u64) -> anyhow::Result<JobStatus> {
         Ok(self
-            .send(self.req(reqwest::Method::GET, &format!("/api/jobs/{id}")))
+            .send(self.endpoint.request(reqwest::Method::GET, &routes::job(id)))
             .await?
             .json()
             .await?)
     }
 
-    /// Every job's status JSON, oldest first.
-    pub async fn jobs(&self) -> anyhow::Result<Vec<Value>> {
-        let v: Value = self
-            .send(self.req(reqwest::Method::GET, "/api/jobs"))
+    /// Every job's status, oldest first.
+    pub async fn jobs(&self) -> anyhow::Result<Vec<JobStatus>> {
+        let list: JobList = self
+            .send(self.endpoint.request(reqwest::Method::GET, routes::JOBS))
             .await?
             .json()
             .await?;
-        Ok(v["jobs"].as_array().cloned().unwrap_or_default())
+        Ok(list.jobs)
     }
 
-    /// Cancels a job; returns its status JSON.
-    pub async fn cancel(&self, id: u64) -> anyhow::Result<Value> {
+    /// Cancels a job; returns its status.
+    pub async fn cancel(&self, id: u64) -> anyhow::Result<JobStatus> {
         Ok(self
-            .send(self.req(reqwest::Method::DELETE, &format!("/api/jobs/{id}")))
+            .send(self.endpoint.request(reqwest::Method::DELETE, &routes::job(id)))
             .await?
             .json()
             .await?)
@@ -114,7 +104,10 @@ impl ApiClient {
     /// A job's latest image, `image.exr` or `image.png`.
     pub async fn image(&self, id: u64, file: &str) -> anyhow::Result<Vec<u8>> {
         Ok(self
-            .send(self.req(reqwest::Method::GET, &format!("/api/jobs/{id}/{file}")))
+            .send(
+                self.endpoint
+                    .request(reqwest::Method::GET, &routes::job_file(id, file)),
+            )
             .await?
             .bytes()
             .await?
@@ -152,14 +145,12 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let job = client.submit(bundle, &scene_name, &settings).await?;
-        let id = job["id"]
-            .as_u64()
-            .context("the coordinator's answer has no job id")?;
-        for w in job["warnings"].as_array().into_iter().flatten() {
-            eprintln!("warning: {}", w.as_str().unwrap_or_default());
+        let id = job.status.id;
+        for w in &job.warnings {
+            eprintln!("warning: {w}");
         }
         println!("{id}");
-        eprintln!("submitted job {id} ({} passes)", job["iterations_total"]);
+        eprintln!("submitted job {id} ({} passes)", job.status.iterations_total);
         if !args.wait {
             return Ok(());
         }
@@ -179,11 +170,10 @@ pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
     let mut said_idle = false;
     let status = loop {
         let s = client.status(id).await?;
-        let state = s["state"].as_str().unwrap_or_default();
-        if matches!(state, "done" | "failed" | "cancelled") {
+        if s.state.is_final() {
             break s;
         }
-        if state == "queued" && s["workers_present"].as_u64() == Some(0) {
+        if s.state == JobState::Queued && s.workers_present == 0 {
             if !said_idle {
                 eprintln!(
                     "job {id} is queued: no worker has asked for work (start one with `worker --coordinator URL`)"
@@ -191,23 +181,23 @@ pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
                 said_idle = true;
             }
         } else {
-            let total = s["iterations_total"].as_u64();
+            let total = Some(s.iterations_total);
             reporter
                 .get_or_insert_with(|| Reporter::new(total, "passes"))
-                .update(s["iterations_done"].as_u64().unwrap_or(0), total, start.elapsed());
+                .update(s.iterations_done, total, start.elapsed());
         }
         tokio::time::sleep(Duration::from_millis(500)).await;
     };
     if let Some(r) = reporter.as_mut() {
         r.finish();
     }
-    match status["state"].as_str() {
-        Some("done") => Ok(()),
-        Some(state) => bail!(
-            "job {id} {state}: {}",
-            status["message"].as_str().unwrap_or("no message")
+    match status.state {
+        JobState::Done => Ok(()),
+        state => bail!(
+            "job {id} {}: {}",
+            state.as_str(),
+            status.message.as_deref().unwrap_or("no message")
         ),
-        None => bail!("job {id}: the coordinator's answer has no state"),
     }
 }
 
@@ -226,46 +216,37 @@ pub async fn fetch(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow
 }
 
 /// One line about a job: id, state, progress, rate, time left, workers.
-pub fn describe(s: &Value) -> String {
-    let (done, total) = (
-        s["iterations_done"].as_u64().unwrap_or(0),
-        s["iterations_total"].as_u64().unwrap_or(0),
-    );
-    let state = s["state"].as_str().unwrap_or("?");
-    let rate = s["rate"].as_f64().unwrap_or(0.0);
+pub fn describe(s: &JobStatus) -> String {
+    let (done, total) = (s.iterations_done, s.iterations_total);
     let mut line = format!(
-        "job {}: {state}, {done}/{total} passes ({:.1}%), {}x{} {}",
-        s["id"],
+        "job {}: {}, {done}/{total} passes ({:.1}%), {}x{} {}",
+        s.id,
+        s.state.as_str(),
         100.0 * done as f64 / total.max(1) as f64,
-        s["width"],
-        s["height"],
-        s["integrator"].as_str().unwrap_or("?")
+        s.width,
+        s.height,
+        s.integrator
     );
-    match state {
-        "queued" if s["workers_present"].as_u64() == Some(0) => {
+    match s.state {
+        JobState::Queued if s.workers_present == 0 => {
             line.push_str(": no worker has asked for work");
         }
-        "running" if rate > 0.0 => {
+        JobState::Running if s.rate > 0.0 => {
             line.push_str(&format!(
-                ", {rate:.1} passes/s, {:.0} s left",
-                total.saturating_sub(done) as f64 / rate
+                ", {:.1} passes/s, {:.0} s left",
+                s.rate,
+                total.saturating_sub(done) as f64 / s.rate
             ));
         }
-        "failed" | "cancelled" => {
-            if let Some(m) = s["message"].as_str() {
+        JobState::Failed | JobState::Cancelled => {
+            if let Some(m) = &s.message {
                 line.push_str(&format!(": {m}"));
             }
         }
         _ => {}
     }
-    let workers: Vec<&str> = s["workers"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(Value::as_str)
-        .collect();
-    if !workers.is_empty() {
-        line.push_str(&format!(", workers: {}", workers.join(", ")));
+    if !s.workers.is_empty() {
+        line.push_str(&format!(", workers: {}", s.workers.join(", ")));
     }
     line
 }

@@ -73,44 +73,7 @@ pub enum FarmError {
     NoImage(u64),
 }
 
-/// What `GET /api/jobs/{id}` answers.
-#[derive(Clone, Debug, Serialize)]
-pub struct JobStatus {
-    /// Job id.
-    pub id: u64,
-    /// queued, running, done, failed or cancelled.
-    pub state: JobState,
-    /// Passes (iterations or samples per pixel) rendered and received.
-    pub iterations_done: u64,
-    /// Passes asked for.
-    pub iterations_total: u64,
-    /// Passes in the latest checkpoint image.
-    pub checkpoint_iterations: u64,
-    /// Workers holding a batch of this job now.
-    pub workers: Vec<String>,
-    /// Workers that asked the coordinator for work recently, on any job: 0 says why a queued
-    /// job does not start.
-    pub workers_present: usize,
-    /// Seconds a coordinator spent on the job since its first batch was handed out (time
-    /// while the coordinator was down does not count; restarts do not reset it).
-    pub elapsed_seconds: f64,
-    /// Passes per second over that time.
-    pub rate: f64,
-    /// `path` or `sppm`.
-    pub integrator: &'static str,
-    /// Image width.
-    pub width: u32,
-    /// Image height.
-    pub height: u32,
-    /// Why the job failed, if it did.
-    pub message: Option<String>,
-    /// When the job was submitted, Unix milliseconds.
-    pub created_unix_ms: u64,
-    /// Batch results received (across coordinator restarts).
-    pub batches_received: u64,
-    /// Bytes of batch results received (across coordinator restarts).
-    pub bytes_received: u64,
-}
+pub use photonfarm::protocol::JobStatus;
 
 /// A job's running sum, with its own lock: merging a result and writing the prefix and the
 /// checkpoint images happen under it, never under the farm's.
@@ -779,7 +742,7 @@ impl Farm {
             workers_present: self.scheduler.workers_present(),
             elapsed_seconds: elapsed,
             rate,
-            integrator: job.render.method.name(),
+            integrator: job.render.method.name().to_string(),
             width: job.width,
             height: job.height,
             message,

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use axum::body::Bytes;
 use photonfarm::compression::{self, Encoding};
-use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest};
+use photonfarm::protocol::{Endpoint, LEASE_KEY_HEADER, Lease, LeaseRequest, routes};
 use tokio::sync::OnceCell;
 
 use crate::cli::LoadgenArgs;
@@ -54,7 +54,6 @@ type Bodies = Mutex<HashMap<(u64, u64), Arc<OnceCell<Bytes>>>>;
 
 struct Shared {
     http: reqwest::Client,
-    token: Option<String>,
     synthetic: Synthetic,
     bodies: Bodies,
     encoding: Encoding,
@@ -66,14 +65,6 @@ struct Shared {
 }
 
 impl Shared {
-    fn req(&self, method: reqwest::Method, url: String) -> reqwest::RequestBuilder {
-        let r = self.http.request(method, url);
-        match &self.token {
-            Some(t) => r.bearer_auth(t),
-            None => r,
-        }
-    }
-
     /// The body of a result of `passes` passes with `odd` odd ones (made on first use, on a
     /// blocking thread, and kept).
     async fn body(self: &Arc<Self>, passes: u64, odd: u64, compress: bool) -> anyhow::Result<Bytes> {
@@ -144,10 +135,7 @@ async fn submit(args: &LoadgenArgs, xml: &str) -> anyhow::Result<u64> {
         ..Default::default()
     };
     let client = ApiClient::new(&args.coordinator, args.token.clone());
-    let status = client.submit(bundle, "scene.xml", &settings).await?;
-    status["id"]
-        .as_u64()
-        .context("the coordinator's answer has no job id")
+    Ok(client.submit(bundle, "scene.xml", &settings).await?.status.id)
 }
 
 async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
@@ -171,12 +159,12 @@ async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
         "job {job}: {} simulated workers as {clients} clients of {} each, {} s per pass",
         args.workers, args.fanout, args.pass_seconds
     );
+    let token = args.worker_token.clone().or_else(|| args.token.clone());
     let shared = Arc::new(Shared {
         http: reqwest::Client::builder()
             .timeout(Duration::from_secs(600))
             .pool_idle_timeout(Duration::from_secs(20))
             .build()?,
-        token: args.worker_token.clone().or_else(|| args.token.clone()),
         synthetic,
         bodies: Mutex::default(),
         encoding: if args.identity {
@@ -197,15 +185,17 @@ async fn drive(args: &LoadgenArgs) -> anyhow::Result<()> {
     };
     let mut tasks = Vec::new();
     for i in 0..clients {
-        let base = targets[i as usize % targets.len()]
-            .trim_end_matches('/')
-            .to_string();
+        let target = Endpoint::new(
+            &targets[i as usize % targets.len()],
+            token.clone(),
+            shared.http.clone(),
+        );
         let shared = shared.clone();
         // Spread the starts over a second, as workers starting at once would not be.
         let delay = Duration::from_millis((i as u64 * 1000) / clients as u64);
         tasks.push(tokio::spawn(async move {
             tokio::time::sleep(delay).await;
-            simulate(shared, base, format!("sim-{i}")).await
+            simulate(shared, target, format!("sim-{i}")).await
         }));
     }
     tokio::time::sleep(Duration::from_secs_f64(args.warmup)).await;
@@ -260,7 +250,7 @@ fn report(
     window: f64,
     t: &Tally,
     cpu: Option<f64>,
-    status: Option<&serde_json::Value>,
+    status: Option<&photonfarm::protocol::JobStatus>,
 ) {
     let mut lease = t.lease_lat.clone();
     let mut upload = t.upload_lat.clone();
@@ -308,13 +298,13 @@ fn report(
     if let Some(s) = status {
         println!(
             "  job: {} passes received in {} batches",
-            s["iterations_done"], s["batches_received"]
+            s.iterations_done, s.batches_received
         );
     }
 }
 
 /// One simulated worker (or relay): lease, wait, upload, until stopped.
-async fn simulate(shared: Arc<Shared>, base: String, name: String) {
+async fn simulate(shared: Arc<Shared>, target: Endpoint, name: String) {
     let mut backoff = Duration::from_millis(200);
     while !shared.stop.load(Ordering::Relaxed) {
         let asked = Instant::now();
@@ -323,8 +313,8 @@ async fn simulate(shared: Arc<Shared>, base: String, name: String) {
             threads: 1,
             renderers: (shared.fanout > 1).then_some(shared.fanout),
         };
-        let sent = shared
-            .req(reqwest::Method::POST, format!("{base}/api/lease"))
+        let sent = target
+            .request(reqwest::Method::POST, routes::LEASE)
             .json(&request)
             .send()
             .await;
@@ -358,7 +348,7 @@ async fn simulate(shared: Arc<Shared>, base: String, name: String) {
         // The body is made while "rendering" (and only once per pass count).
         let (body, ()) = tokio::join!(
             shared.body(passes, odd, compress),
-            wait_rendering(&shared, &base, &lease, render)
+            wait_rendering(&target, &lease, render)
         );
         let Ok(body) = body else {
             shared.count(|t| t.errors += 1);
@@ -366,7 +356,7 @@ async fn simulate(shared: Arc<Shared>, base: String, name: String) {
         };
         let upload = upload(
             shared.clone(),
-            base.clone(),
+            target.clone(),
             lease,
             body,
             compress,
@@ -386,7 +376,7 @@ async fn simulate(shared: Arc<Shared>, base: String, name: String) {
 /// Uploads a result and tallies the cycle.
 async fn upload(
     shared: Arc<Shared>,
-    base: String,
+    target: Endpoint,
     lease: Lease,
     body: Bytes,
     compress: bool,
@@ -395,11 +385,8 @@ async fn upload(
 ) {
     let passes = lease.end - lease.start;
     let started = Instant::now();
-    let mut put = shared
-        .req(
-            reqwest::Method::PUT,
-            format!("{base}/api/leases/{}/result", lease.lease_id),
-        )
+    let mut put = target
+        .request(reqwest::Method::PUT, &routes::result(lease.lease_id))
         .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
         .header(LEASE_KEY_HEADER, &lease.key);
     if compress {
@@ -439,7 +426,7 @@ impl Shared {
 }
 
 /// Sleeps for the simulated render time, heartbeating the lease as a worker does.
-async fn wait_rendering(shared: &Shared, base: &str, lease: &Lease, render: Duration) {
+async fn wait_rendering(target: &Endpoint, lease: &Lease, render: Duration) {
     let until = Instant::now() + render;
     let every = Duration::from_millis(lease.heartbeat_ms.max(10));
     loop {
@@ -449,11 +436,8 @@ async fn wait_rendering(shared: &Shared, base: &str, lease: &Lease, render: Dura
         }
         tokio::time::sleep(left.min(every)).await;
         if Instant::now() < until {
-            let _ = shared
-                .req(
-                    reqwest::Method::POST,
-                    format!("{base}/api/leases/{}/heartbeat", lease.lease_id),
-                )
+            let _ = target
+                .request(reqwest::Method::POST, &routes::heartbeat(lease.lease_id))
                 .header(LEASE_KEY_HEADER, &lease.key)
                 .send()
                 .await;

@@ -60,52 +60,7 @@ impl Default for SchedulerConfig {
 /// (docs/scaling.md: 17.6 Mpx/s at 1920×1080 and 12.6 at 512² at full load), with a margin.
 pub const DEFAULT_ABSORB_PIXELS_PER_S: f64 = 10e6;
 
-/// A job's lifecycle.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum JobState {
-    /// Accepted, nothing rendered yet.
-    Queued,
-    /// Some passes rendered.
-    Running,
-    /// Every pass rendered.
-    Done,
-    /// A batch failed on too many workers.
-    Failed,
-    /// Cancelled by a user.
-    Cancelled,
-}
-
-impl JobState {
-    /// Whether the job will never change again.
-    pub fn is_final(self) -> bool {
-        matches!(self, JobState::Done | JobState::Failed | JobState::Cancelled)
-    }
-
-    /// The name used in the API and the database.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JobState::Queued => "queued",
-            JobState::Running => "running",
-            JobState::Done => "done",
-            JobState::Failed => "failed",
-            JobState::Cancelled => "cancelled",
-        }
-    }
-
-    /// Parses [`JobState::as_str`].
-    pub fn parse(s: &str) -> Option<JobState> {
-        [
-            JobState::Queued,
-            JobState::Running,
-            JobState::Done,
-            JobState::Failed,
-            JobState::Cancelled,
-        ]
-        .into_iter()
-        .find(|j| j.as_str() == s)
-    }
-}
+pub use photonfarm::protocol::JobState;
 
 /// A granted batch.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -32,12 +32,9 @@ pub struct ServeConfig {
     pub farm: FarmConfig,
 }
 
-/// Serves until `shutdown` completes, then finishes the requests under way.
-pub async fn run(
-    listener: TcpListener,
-    config: ServeConfig,
-    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
-) -> anyhow::Result<()> {
+/// The service's state: the farm opened on its data folder (resuming its jobs), and the
+/// request limits. [`run`] serves it; tests drive its router in process.
+pub async fn open(config: &ServeConfig) -> anyhow::Result<Arc<AppState>> {
     let data = config.data.clone();
     let farm_config = config.farm;
     let farm = tokio::task::spawn_blocking(move || -> anyhow::Result<SharedFarm> {
@@ -46,7 +43,7 @@ pub async fn run(
     })
     .await??;
     let admission = config.admission;
-    let state = Arc::new(AppState {
+    Ok(Arc::new(AppState {
         layout: farm.read(|f| f.layout()),
         farm,
         tokens: config.tokens.clone(),
@@ -59,7 +56,17 @@ pub async fn run(
         scene_checks: Semaphore::new(admission.max_scene_checks.max(1)),
         metrics: Default::default(),
         stopping: tokio::sync::watch::Sender::new(false),
-    });
+    }))
+}
+
+/// Serves until `shutdown` completes, then finishes the requests under way.
+pub async fn run(
+    listener: TcpListener,
+    config: ServeConfig,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let state = open(&config).await?;
+    let admission = config.admission;
     // Leases without heartbeats expire; check several times per timeout.
     let period = Duration::from_millis((config.farm.scheduler.lease_timeout_ms / 10).clamp(10, 1000));
     let expiry_state = state.clone();

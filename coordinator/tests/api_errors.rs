@@ -322,3 +322,88 @@ async fn v_id(api: &Api) -> u64 {
         .as_u64()
         .unwrap()
 }
+
+/// Every route of `photonfarm::protocol::routes` reaches a handler of the coordinator's router
+/// (none falls through to "no such endpoint"), and the workers' routes take only the workers'
+/// token: the router driven in process, as axum's examples test handlers.
+#[tokio::test]
+async fn every_protocol_route_is_served_and_guarded_by_its_token() {
+    use axum::body::Body;
+    use axum::http::{Request, header};
+    use coordinator::{admission::Admission, api::Tokens, farm::FarmConfig, service};
+    use photonfarm::protocol::routes;
+    use tower::ServiceExt;
+
+    let dir = tempfile::tempdir().unwrap();
+    let config = service::ServeConfig {
+        data: dir.path().to_path_buf(),
+        tokens: Tokens {
+            client: Some("client".into()),
+            worker: Some("worker".into()),
+        },
+        admission: Admission::for_memory(1 << 30),
+        checker: None,
+        farm: FarmConfig {
+            limits: photonfarm::limits::Limits::for_memory(1 << 30),
+            ..FarmConfig::default()
+        },
+    };
+    let app = coordinator::api::router(service::open(&config).await.unwrap());
+    let call = |method: &str, path: String, token: &str| {
+        let request = Request::builder()
+            .method(method)
+            .uri(path)
+            .header(header::AUTHORIZATION, format!("Bearer {token}"))
+            .header(header::CONTENT_TYPE, "application/json")
+            .body(Body::from(r#"{"worker": "w", "threads": 1}"#))
+            .unwrap();
+        let app = app.clone();
+        async move {
+            let response = app.oneshot(request).await.unwrap();
+            let status = response.status();
+            let body = axum::body::to_bytes(response.into_body(), 1 << 20).await.unwrap();
+            (status, String::from_utf8_lossy(&body).into_owned())
+        }
+    };
+    let users = [
+        ("GET", routes::HEALTH.to_string()),
+        ("GET", routes::METRICS.to_string()),
+        ("GET", routes::JOBS.to_string()),
+        ("POST", routes::JOBS.to_string()),
+        ("GET", routes::job(1)),
+        ("DELETE", routes::job(1)),
+        ("GET", format!("{}/noise", routes::job(1))),
+        ("GET", routes::job_file(1, "image.exr")),
+        ("GET", routes::WORKERS.to_string()),
+    ];
+    let workers = [
+        ("POST", routes::lease(0)),
+        ("POST", routes::heartbeat(5)),
+        ("PUT", routes::result(5)),
+        ("POST", routes::release(5)),
+        ("GET", routes::bundle("ab")),
+    ];
+    for (token, list, other) in [
+        ("client", &users[..], "worker"),
+        ("worker", &workers[..], "client"),
+    ] {
+        for (method, path) in list {
+            let (status, body) = call(method, path.clone(), token).await;
+            assert!(
+                !body.contains("no such endpoint"),
+                "{method} {path}: {status} {body}"
+            );
+            assert_ne!(status, StatusCode::UNAUTHORIZED, "{method} {path}: {body}");
+            if path != routes::HEALTH {
+                let (status, body) = call(method, path.clone(), other).await;
+                assert_eq!(
+                    status,
+                    StatusCode::UNAUTHORIZED,
+                    "{method} {path} with the {other} token: {body}"
+                );
+            }
+        }
+    }
+    let (status, _) = call("GET", "/api/nothing".into(), "client").await;
+    assert_eq!(status, StatusCode::NOT_FOUND);
+}

@@ -20,7 +20,7 @@ use anyhow::{Context, bail};
 use photonfarm::bundle::UnpackLimits;
 use photonfarm::compression::{self, Encoding};
 use photonfarm::limits::Limits;
-use photonfarm::protocol::{LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encode_result};
+use photonfarm::protocol::{Endpoint, LEASE_KEY_HEADER, Lease, LeaseRequest, Release, encode_result, routes};
 use photonfarm::render::Renderer;
 use photonfarm::scene::Scene;
 use tokio::sync::watch;
@@ -48,21 +48,8 @@ pub struct WorkerConfig {
 /// Scenes loaded from bundles, by (bundle, scene path, defines).
 type SceneCache = HashMap<(String, String, Vec<(String, String)>), Arc<Scene>>;
 
-struct Client {
-    base: String,
-    token: Option<String>,
-    http: reqwest::Client,
-}
-
-impl Client {
-    fn req(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
-        let r = self.http.request(method, format!("{}{path}", self.base));
-        match &self.token {
-            Some(t) => r.bearer_auth(t),
-            None => r,
-        }
-    }
-}
+/// The coordinator (or relay) the worker serves.
+type Client = Endpoint;
 
 /// Runs until `shutdown` completes (then finishes the batch under way) or a fatal error.
 pub async fn run(
@@ -84,16 +71,16 @@ pub async fn run(
             .context("cannot start the render threads")?,
     );
     let base = coordinator_url(&config.coordinator)?;
-    let client = Arc::new(Client {
-        base,
-        token: config.token.clone(),
-        http: reqwest::Client::builder()
+    let client = Arc::new(Endpoint::new(
+        &base,
+        config.token.clone(),
+        reqwest::Client::builder()
             .timeout(Duration::from_secs(300))
             .build()?,
-    });
+    ));
     let mut scenes = SceneCache::new();
     let mut backoff = Duration::from_millis(200);
-    tracing::info!(name = %config.name, threads = config.threads, coordinator = %client.base, "worker started");
+    tracing::info!(name = %config.name, threads = config.threads, coordinator = %client.base(), "worker started");
     let mut trouble = Trouble::default();
     let outbox = Outbox::open(&config.cache)?;
     // Results an earlier run finished but could not deliver.
@@ -114,19 +101,19 @@ pub async fn run(
         };
         let lease = match answer {
             Ok(Some(lease)) => {
-                trouble.cleared(&client.base);
+                trouble.cleared(client.base());
                 backoff = Duration::from_millis(200);
                 lease
             }
             Ok(None) if asked.elapsed() >= LEASE_WAIT / 2 => {
                 // The coordinator waited for work and none came: ask again at once.
-                trouble.cleared(&client.base);
+                trouble.cleared(client.base());
                 backoff = Duration::from_millis(200);
                 continue;
             }
             Ok(None) => {
                 // An answer at once: a coordinator that does not wait for work. Poll.
-                trouble.cleared(&client.base);
+                trouble.cleared(client.base());
                 tokio::select! {
                     _ = tokio::time::sleep(backoff) => {}
                     _ = stop_rx.changed() => {}
@@ -137,7 +124,7 @@ pub async fn run(
             Err(e) => {
                 // The coordinator is away (restarting, or a wrong address) or refuses us: say so
                 // at once, then now and then; give up only on a token refused again and again.
-                trouble.failed(&client.base, &e)?;
+                trouble.failed(client.base(), &e)?;
                 tokio::select! {
                     _ = tokio::time::sleep(backoff) => {}
                     _ = stop_rx.changed() => {}
@@ -157,10 +144,7 @@ pub async fn run(
                     error: Some(format!("{e:#}")),
                 };
                 let _ = client
-                    .req(
-                        reqwest::Method::POST,
-                        &format!("/api/leases/{}/release", lease.lease_id),
-                    )
+                    .request(reqwest::Method::POST, &routes::release(lease.lease_id))
                     .header(LEASE_KEY_HEADER, &lease.key)
                     .json(&release)
                     .send()
@@ -272,9 +256,9 @@ async fn request_lease(client: &Client, config: &WorkerConfig) -> Result<Option<
         renderers: None,
     };
     let resp = client
-        .req(
+        .request(
             reqwest::Method::POST,
-            &format!("/api/lease?wait_ms={}", LEASE_WAIT.as_millis()),
+            &routes::lease(LEASE_WAIT.as_millis() as u64),
         )
         .json(&req)
         .send()
@@ -408,10 +392,7 @@ async fn deliver(
     let mut stopped_at: Option<std::time::Instant> = None;
     loop {
         let mut request = client
-            .req(
-                reqwest::Method::PUT,
-                &format!("/api/leases/{}/result", parcel.lease_id),
-            )
+            .request(reqwest::Method::PUT, &routes::result(parcel.lease_id))
             .header(reqwest::header::CONTENT_TYPE, "application/octet-stream")
             .header(LEASE_KEY_HEADER, &parcel.key);
         if let Some(e) = encoding.header() {
@@ -420,7 +401,7 @@ async fn deliver(
         let sent = request.body(bytes.clone()).send().await;
         let failure = match sent {
             Ok(resp) if resp.status().is_success() => {
-                trouble.cleared(&client.base);
+                trouble.cleared(client.base());
                 outbox.remove(parcel);
                 tracing::info!(
                     job = parcel.job_id,
@@ -437,7 +418,7 @@ async fn deliver(
             Ok(resp) => {
                 // Refused for good: the lease expired and went to another worker, the job
                 // ended, or the result does not fit. Sending it again cannot help.
-                trouble.cleared(&client.base);
+                trouble.cleared(client.base());
                 outbox.remove(parcel);
                 let s = resp.status();
                 let text = resp.text().await.unwrap_or_default();
@@ -453,7 +434,7 @@ async fn deliver(
             }
             Err(e) => RequestError::Unreachable(error_chain(&e)),
         };
-        trouble.failed(&client.base, &failure)?;
+        trouble.failed(client.base(), &failure)?;
         if *stop.borrow() {
             let since = *stopped_at.get_or_insert_with(std::time::Instant::now);
             if since.elapsed() >= DELIVERY_AFTER_STOP {
@@ -480,7 +461,7 @@ async fn heartbeat_loop(client: Arc<Client>, lease: u64, key: String, every_ms: 
     loop {
         tick.tick().await;
         match client
-            .req(reqwest::Method::POST, &format!("/api/leases/{lease}/heartbeat"))
+            .request(reqwest::Method::POST, &routes::heartbeat(lease))
             .header(LEASE_KEY_HEADER, &key)
             .send()
             .await
@@ -505,7 +486,7 @@ async fn download(client: &Client, bundle: &str, path: &std::path::Path) -> anyh
     use sha2::Digest;
     use tokio::io::AsyncWriteExt;
     let mut resp = client
-        .req(reqwest::Method::GET, &format!("/api/bundles/{bundle}"))
+        .request(reqwest::Method::GET, &routes::bundle(bundle))
         .send()
         .await?
         .error_for_status()?;

@@ -28,8 +28,8 @@ use axum::routing::{get, post, put};
 use axum::{Json, Router};
 use photonfarm::compression::{self, CompressionError};
 use photonfarm::protocol::{
-    HeartbeatReply, LEASE_KEY_HEADER, Lease, LeaseRequest, Release, decode_result, encode_batch,
-    encode_result, max_encoded_batch,
+    Endpoint, HeartbeatReply, LEASE_KEY_HEADER, Lease, LeaseRequest, Release, decode_result, encode_batch,
+    encode_result, max_encoded_batch, routes,
 };
 use serde_json::json;
 use sha2::{Digest, Sha256};
@@ -43,11 +43,9 @@ use book::{Book, PartError};
 pub struct Relay {
     book: Mutex<Book>,
     epoch: Instant,
-    upstream: String,
-    token: Option<String>,
+    upstream: Endpoint,
     local_token: Option<String>,
     name: String,
-    http: reqwest::Client,
     /// One upstream lease request at a time: workers asking together share the batch it gets.
     leasing: tokio::sync::Mutex<()>,
     /// Local results read at once (each may be a whole image's sums).
@@ -106,13 +104,15 @@ impl Relay {
         Ok(Arc::new(Relay {
             book: Mutex::new(Book::new(config.lease_timeout_ms)),
             epoch: Instant::now(),
-            upstream: config.upstream.trim_end_matches('/').to_string(),
-            token: config.token,
+            upstream: Endpoint::new(
+                &config.upstream,
+                config.token,
+                reqwest::Client::builder()
+                    .timeout(Duration::from_secs(600))
+                    .build()?,
+            ),
             local_token: config.local_token,
             name: config.name,
-            http: reqwest::Client::builder()
-                .timeout(Duration::from_secs(600))
-                .build()?,
             leasing: tokio::sync::Mutex::new(()),
             uploads: tokio::sync::Semaphore::new(config.max_uploads.max(1)),
             serving: config.serving,
@@ -128,11 +128,7 @@ impl Relay {
     }
 
     fn up(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
-        let r = self.http.request(method, format!("{}{path}", self.upstream));
-        match &self.token {
-            Some(t) => r.bearer_auth(t),
-            None => r,
-        }
+        self.upstream.request(method, path)
     }
 
     fn new_key(&self) -> String {
@@ -151,15 +147,15 @@ impl Relay {
 /// bounded by its lease in the handler.
 pub fn router(relay: Arc<Relay>) -> Router {
     let routes = Router::new()
-        .route("/healthz", get(|| async { Json(json!({ "status": "ok" })) }))
-        .route("/api/lease", post(lease))
-        .route("/api/leases/{id}/heartbeat", post(heartbeat))
+        .route(routes::HEALTH, get(|| async { Json(json!({ "status": "ok" })) }))
+        .route(routes::LEASE, post(lease))
+        .route(routes::HEARTBEAT, post(heartbeat))
         .route(
-            "/api/leases/{id}/result",
+            routes::RESULT,
             put(result).layer(axum::extract::DefaultBodyLimit::disable()),
         )
-        .route("/api/leases/{id}/release", post(release))
-        .route("/api/bundles/{hash}", get(bundle));
+        .route(routes::RELEASE, post(release))
+        .route(routes::BUNDLE, get(bundle));
     crate::serving::guarded(routes, &relay.serving)
         .layer(axum::middleware::from_fn_with_state(relay.clone(), auth))
         .with_state(relay)
@@ -216,7 +212,7 @@ async fn lease(State(relay): State<Arc<Relay>>, req: Request) -> RelayResult<Res
         renderers: Some(renderers),
     };
     let resp = relay
-        .up(reqwest::Method::POST, "/api/lease")
+        .up(reqwest::Method::POST, routes::LEASE)
         .json(&request)
         .send()
         .await
@@ -276,10 +272,7 @@ async fn release(
             "a batch failed on local workers; giving it up upstream"
         );
         let _ = relay
-            .up(
-                reqwest::Method::POST,
-                &format!("/api/leases/{}/release", up.lease_id),
-            )
+            .up(reqwest::Method::POST, &routes::release(up.lease_id))
             .header(LEASE_KEY_HEADER, &up.key)
             .json(&r)
             .send()
@@ -400,10 +393,7 @@ async fn forward(relay: Arc<Relay>, lease: Lease) {
     let mut backoff = Duration::from_millis(200);
     loop {
         let mut put = relay
-            .up(
-                reqwest::Method::PUT,
-                &format!("/api/leases/{}/result", lease.lease_id),
-            )
+            .up(reqwest::Method::PUT, &routes::result(lease.lease_id))
             .header(header::CONTENT_TYPE, "application/octet-stream")
             .header(LEASE_KEY_HEADER, &lease.key);
         if compress {
@@ -447,7 +437,7 @@ async fn bundle(State(relay): State<Arc<Relay>>, Path(hash): Path<String>) -> Re
         return Err(RelayError(StatusCode::NOT_FOUND, "no such bundle".into()));
     }
     let resp = relay
-        .up(reqwest::Method::GET, &format!("/api/bundles/{hash}"))
+        .up(reqwest::Method::GET, &routes::bundle(&hash))
         .send()
         .await
         .map_err(bad_gateway)?;
@@ -482,7 +472,7 @@ async fn upkeep(relay: Arc<Relay>) {
         let due = relay.book().due(now);
         for (id, key) in due {
             let r = relay
-                .up(reqwest::Method::POST, &format!("/api/leases/{id}/heartbeat"))
+                .up(reqwest::Method::POST, &routes::heartbeat(id))
                 .header(LEASE_KEY_HEADER, &key)
                 .timeout(Duration::from_secs(10))
                 .send()
