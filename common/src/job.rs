@@ -101,6 +101,10 @@ pub struct JobSettings {
     /// Write a checkpoint every this many passes.
     #[serde(default)]
     pub checkpoint_every: Option<u64>,
+    /// A sequence: the frames in Flamenco's syntax ([`crate::frames::parse_frames`]), each
+    /// rendered with [`JobSettings::for_frame`]'s settings. None: one image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<String>,
 }
 
 /// Why settings cannot be used.
@@ -150,6 +154,17 @@ fn declared_iterations(v: f64) -> Result<u64, JobError> {
 }
 
 impl JobSettings {
+    /// The settings of `frame` of the sequence `frames`: its parameters (the frame number and
+    /// the ramps) and its seed, from [`crate::frames`]; one image, so no frame list.
+    pub fn for_frame(&self, frames: &[u32], frame: u32) -> Result<JobSettings, crate::frames::FrameError> {
+        Ok(JobSettings {
+            defines: crate::frames::frame_defines(&self.defines, frames, frame)?,
+            seed: crate::frames::frame_seed(self.seed, frame),
+            frames: None,
+            ..self.clone()
+        })
+    }
+
     /// Checks the number and length of the `-D` parameters (they are stored with the job and
     /// sent with every batch).
     pub fn check_defines(&self) -> Result<(), JobError> {

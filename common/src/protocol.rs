@@ -103,6 +103,34 @@ pub struct JobStatus {
     pub batches_received: u64,
     /// Bytes of batch results received (across coordinator restarts).
     pub bytes_received: u64,
+    /// Of a frame of a sequence: the sequence's job.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence: Option<u64>,
+    /// Of a frame of a sequence: its number.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<u32>,
+    /// Of a sequence: its frames, in the order given. The sequence's passes, checkpoint passes
+    /// and counters are its frames' summed; its state is failed if a frame failed, done when
+    /// every frame is, running once any started.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<FrameStatus>,
+}
+
+/// One frame of a sequence's status. Its image is its job's (`GET /api/jobs/{job}/image.exr`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameStatus {
+    /// The frame number.
+    pub frame: u32,
+    /// The frame's job.
+    pub job: u64,
+    /// Its state.
+    pub state: JobState,
+    /// Passes rendered and received.
+    pub iterations_done: u64,
+    /// Passes asked for.
+    pub iterations_total: u64,
+    /// Passes in its latest image.
+    pub checkpoint_iterations: u64,
 }
 
 /// What `GET /api/jobs` answers.

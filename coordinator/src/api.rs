@@ -18,6 +18,7 @@ use axum::routing::{get, post, put};
 use axum::{Json, Router};
 use photonfarm::bundle::BundleError;
 use photonfarm::compression::{self, CompressionError, Encoding};
+use photonfarm::frames::parse_frames;
 use photonfarm::job::JobSettings;
 use photonfarm::protocol::{
     JobList, LeaseRequest, Release, Submitted, decode_result, max_encoded_batch, routes,
@@ -30,7 +31,7 @@ use tokio::sync::Semaphore;
 
 use crate::accumulator::Accumulator;
 use crate::admission::Admission;
-use crate::farm::{Committed, Farm, FarmError, SharedFarm};
+use crate::farm::{Committed, Farm, FarmError, FrameJob, SharedFarm};
 use crate::result_body::{BodyError, lease_key, receive_result_to, result_encoding};
 use crate::scene_check::{CheckError, check_in_child};
 use crate::serving::JSON_LIMIT;
@@ -377,41 +378,100 @@ fn accept_bundle(
         )));
     }
     let scene_path = files_dir.join(&scene_rel);
-    let checked = match &state.checker {
-        Some(program) => check_in_child(
-            program,
-            &scene_path,
-            &files_dir,
-            &settings,
-            scratch,
-            std::time::Duration::from_secs(limits.scene_check_timeout_s),
-        ),
-        None => crate::scene_check::check(&scene_path, &files_dir, &settings).map_err(CheckError::Refused),
-    }
-    .map_err(|e| match e {
-        CheckError::Internal(m) => ApiError::internal(m),
-        // Name files as the user knows them: relative to the bundle, never by the
-        // coordinator's own paths.
-        other => {
-            let ours = files_dir.display().to_string();
-            let real = files_dir
-                .canonicalize()
-                .map_or_else(|_| ours.clone(), |p| p.display().to_string());
-            bad(other
-                .to_string()
-                .replace(&format!("{real}/"), "")
-                .replace(&format!("{ours}/"), ""))
+    let check = |settings: &JobSettings| {
+        match &state.checker {
+            Some(program) => check_in_child(
+                program,
+                &scene_path,
+                &files_dir,
+                settings,
+                scratch,
+                std::time::Duration::from_secs(limits.scene_check_timeout_s),
+            ),
+            None => crate::scene_check::check(&scene_path, &files_dir, settings).map_err(CheckError::Refused),
         }
-    })?;
+        .map_err(|e| match e {
+            CheckError::Internal(m) => ApiError::internal(m),
+            // Name files as the user knows them: relative to the bundle, never by the
+            // coordinator's own paths.
+            other => {
+                let ours = files_dir.display().to_string();
+                let real = files_dir
+                    .canonicalize()
+                    .map_or_else(|_| ours.clone(), |p| p.display().to_string());
+                bad(other
+                    .to_string()
+                    .replace(&format!("{real}/"), "")
+                    .replace(&format!("{ours}/"), ""))
+            }
+        })
+        .and_then(|checked| {
+            limits
+                .job
+                .check_job(
+                    checked.width,
+                    checked.height,
+                    Some(checked.total),
+                    &checked.render,
+                )
+                .map_err(|e| bad(e.to_string()))?;
+            Ok(checked)
+        })
+    };
+    // A sequence: each frame checked with its own settings (its parameters may change the
+    // film or the SPPM radius), before anything is allocated; their sums together are held
+    // to one job's film limit, as they are all allocated now.
+    let frames = match &settings.frames {
+        None => None,
+        Some(spec) => {
+            let frames = parse_frames(spec).map_err(|e| bad(e.to_string()))?;
+            let mut checked = Vec::with_capacity(frames.len());
+            let mut pixels = 0u64;
+            for &frame in &frames {
+                let frame_settings = settings
+                    .for_frame(&frames, frame)
+                    .map_err(|e| bad(e.to_string()))?;
+                let c = check(&frame_settings)?;
+                let px = c.width as u64 * c.height as u64;
+                pixels += px;
+                // Judged from the first frame before checking the others: each check loads
+                // the scene.
+                if pixels > limits.job.max_pixels
+                    || px.saturating_mul(frames.len() as u64) > limits.job.max_pixels
+                {
+                    return Err(too_large(format!(
+                        "the sequence's frames take more than {} pixels together, the limit of one job's \
+                         film (--max-pixels): submit fewer frames at a time",
+                        limits.job.max_pixels
+                    )));
+                }
+                checked.push((frame, frame_settings, c));
+            }
+            Some(checked)
+        }
+    };
+    let checked = match &frames {
+        Some(f) => f[0].2.clone(),
+        None => check(&settings)?,
+    };
     let total = checked.total;
-    limits
-        .job
-        .check_job(checked.width, checked.height, Some(total), &checked.render)
-        .map_err(|e| bad(e.to_string()))?;
-    // Everything that takes time or memory, before the lock: the empty sum, the archive and
+    // Everything that takes time or memory, before the lock: the empty sums, the archive and
     // its unpacked files in their content-addressed places.
     let window = settings.checkpoint_every.unwrap_or(0);
-    let sum = Accumulator::empty(checked.width, checked.height, window);
+    let single = frames
+        .is_none()
+        .then(|| Accumulator::empty(checked.width, checked.height, window));
+    let frames: Option<Vec<FrameJob>> = frames.map(|f| {
+        f.into_iter()
+            .map(|(frame, settings, c)| FrameJob {
+                frame,
+                settings,
+                render: c.render,
+                total: c.total,
+                sum: Accumulator::empty(c.width, c.height, window),
+            })
+            .collect()
+    });
     let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
     if !stored.exists() {
         crate::store::rename_durably(archive, &stored).map_err(storage_error)?;
@@ -420,19 +480,30 @@ fn accept_bundle(
         let _ = std::fs::rename(&files_dir, &dir);
     }
     let (id, status) = with_farm(state, |farm| {
-        let sum = if window == 0 {
-            sum.with_window(farm.window_of(&settings))
-        } else {
-            sum
+        let windowed = |sum: Accumulator, settings: &JobSettings| {
+            if window == 0 {
+                sum.with_window(farm.window_of(settings))
+            } else {
+                sum
+            }
         };
-        let id = farm.create_job(
-            &settings,
-            checked.render,
-            total,
-            &scene_rel.to_string_lossy(),
-            hash,
-            sum,
-        )?;
+        let scene = scene_rel.to_string_lossy();
+        let id = match frames {
+            Some(frames) => {
+                let frames = frames
+                    .into_iter()
+                    .map(|f| FrameJob {
+                        sum: windowed(f.sum, &f.settings),
+                        ..f
+                    })
+                    .collect();
+                farm.create_sequence(&settings, frames, &scene, hash)?
+            }
+            None => {
+                let sum = windowed(single.expect("made for a single image"), &settings);
+                farm.create_job(&settings, checked.render, total, &scene, hash, sum)?
+            }
+        };
         Ok((id, farm.status(id).ok_or(FarmError::NoJob(id))?))
     })?;
     tracing::info!(job = id, total, "job accepted");

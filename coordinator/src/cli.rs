@@ -244,6 +244,13 @@ pub struct JobArgs {
     /// Override a scene parameter declared with <default name=... value=...>; repeatable.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
+    /// Render a sequence: the frames in Flamenco's syntax (`1-240`, `1-100x2,150`). Each frame
+    /// sets the scene parameter `frame` (`$frame`; a scene need not use it) and has its own
+    /// seed, derived from --seed and the frame; each `-D name=A:B` runs linearly from A at the
+    /// first frame to B at the last (`render`: --time-limit applies to each frame, and --resume
+    /// goes on from the first unfinished frame; `submit`: one job of many frames).
+    #[arg(long, value_name = "LIST")]
+    pub frames: Option<String>,
 }
 
 impl JobArgs {
@@ -289,6 +296,7 @@ impl JobArgs {
             defines: self.define.clone(),
             seed: self.seed,
             checkpoint_every: self.checkpoint_every,
+            frames: self.frames.clone(),
         })
     }
 }
@@ -304,13 +312,6 @@ pub struct RenderArgs {
     /// a name without `#` gets the number, four digits, before its extension (as Blender does).
     #[arg(long, short)]
     pub out: PathBuf,
-    /// Render a sequence: the frames in Flamenco's syntax (`1-240`, `1-100x2,150`). Each frame
-    /// sets the scene parameter `frame` (`$frame`; a scene need not use it) and has its own
-    /// seed, derived from --seed and the frame; each `-D name=A:B` runs linearly from A at the
-    /// first frame to B at the last. --time-limit applies to each frame, and --resume goes on
-    /// from the first unfinished frame.
-    #[arg(long, value_name = "LIST")]
-    pub frames: Option<String>,
     /// Stop after this many seconds, at the end of the batch under way.
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub time_limit: Option<f64>,

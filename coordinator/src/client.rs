@@ -138,8 +138,16 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
     }
     let client = ApiClient::for_connection(&args.conn)?;
     let settings = args.job.settings()?;
-    // Load locally first: a broken scene fails here, with its file and line, before uploading.
-    let scene = Scene::load(&args.job.scene, &settings.defines)?;
+    // Load locally first: a broken scene fails here, with its file and line, before uploading
+    // (a sequence's first frame; the coordinator checks every frame).
+    let first = match &settings.frames {
+        Some(spec) => {
+            let frames = photonfarm::frames::parse_frames(spec)?;
+            settings.for_frame(&frames, frames[0])?
+        }
+        None => settings.clone(),
+    };
+    let scene = Scene::load(&args.job.scene, &first.defines)?;
     let (bundle, scene_in_bundle) = photonfarm::bundle::pack(&args.job.scene, &scene.files)?;
     let scene_name = scene_in_bundle.to_string_lossy().into_owned();
     let rt = tokio::runtime::Runtime::new()?;
@@ -168,8 +176,25 @@ pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
     let start = Instant::now();
     let mut reporter: Option<Reporter> = None;
     let mut said_idle = false;
+    let mut frames_said = std::collections::HashSet::new();
     let status = loop {
         let s = client.status(id).await?;
+        // A sequence: each frame said once when it ends, with how far the whole is.
+        for f in &s.frames {
+            if f.state.is_final() && frames_said.insert(f.frame) {
+                let ended = frames_said.len();
+                let msg = format!(
+                    "frame {} {} ({ended} of {} frames)",
+                    f.frame,
+                    f.state.as_str(),
+                    s.frames.len()
+                );
+                match &reporter {
+                    Some(r) => r.println(&msg),
+                    None => eprintln!("{msg}"),
+                }
+            }
+        }
         if s.state.is_final() {
             break s;
         }
@@ -201,8 +226,37 @@ pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
     }
 }
 
-/// Downloads a job's latest image to `out` (EXR or PNG by its extension).
+/// Downloads a job's latest image to `out` (EXR or PNG by its extension). Of a sequence, every
+/// finished frame's: `out` names them as `render --frames` does (`shots/f-####.exr`), or is a
+/// folder, which gets `####.exr`.
 pub async fn fetch(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow::Result<()> {
+    let status = client.status(id).await?;
+    if status.frames.is_empty() {
+        return fetch_image(client, id, out).await;
+    }
+    let pattern = if out.is_dir() {
+        out.join("####.exr")
+    } else {
+        out.to_path_buf()
+    };
+    check_output(&pattern)?;
+    let done: Vec<_> = status
+        .frames
+        .iter()
+        .filter(|f| f.state == JobState::Done)
+        .collect();
+    if done.is_empty() {
+        bail!("job {id}: no frame is finished yet");
+    }
+    for f in &done {
+        fetch_image(client, f.job, &photonfarm::frames::frame_path(&pattern, f.frame)).await?;
+    }
+    eprintln!("{} of {} frames fetched", done.len(), status.frames.len());
+    Ok(())
+}
+
+/// Downloads one image.
+async fn fetch_image(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow::Result<()> {
     check_output(out)?;
     let ext = out
         .extension()
@@ -247,6 +301,10 @@ pub fn describe(s: &JobStatus) -> String {
     }
     if !s.workers.is_empty() {
         line.push_str(&format!(", workers: {}", s.workers.join(", ")));
+    }
+    if !s.frames.is_empty() {
+        let done = s.frames.iter().filter(|f| f.state == JobState::Done).count();
+        line.push_str(&format!(", {done} of {} frames done", s.frames.len()));
     }
     line
 }

@@ -73,7 +73,7 @@ pub enum FarmError {
     NoImage(u64),
 }
 
-pub use photonfarm::protocol::JobStatus;
+pub use photonfarm::protocol::{FrameStatus, JobStatus};
 
 /// A job's running sum, with its own lock: merging a result and writing the prefix and the
 /// checkpoint images happen under it, never under the farm's.
@@ -105,6 +105,26 @@ struct JobEntry {
     /// the database yet (they are saved at the next checkpoint).
     noise: Vec<(u64, f64)>,
     noise_saved: usize,
+    /// Of a frame of a sequence: the sequence's job and the frame number.
+    frame_of: Option<(u64, u32)>,
+    /// Of a sequence: its frames' (frame number, job). A sequence is bookkeeping only: its
+    /// frames are jobs, scheduled, summed and stored as any.
+    frames: Vec<(u32, u64)>,
+}
+
+/// One frame of a sequence to create: its settings resolved against its scene, and its empty
+/// sum (allocated by the caller, outside the lock).
+pub struct FrameJob {
+    /// The frame number.
+    pub frame: u32,
+    /// The frame's settings ([`JobSettings::for_frame`]).
+    pub settings: JobSettings,
+    /// What workers run for it.
+    pub render: RenderSettings,
+    /// Its passes.
+    pub total: u64,
+    /// Its empty sum.
+    pub sum: Accumulator,
 }
 
 /// What `GET /api/jobs/{id}/noise` answers.
@@ -293,6 +313,15 @@ impl Farm {
         let mut saved = HashMap::new();
         for row in store.load_jobs()? {
             let id = row.id;
+            if row.frames.is_some() {
+                // A sequence: bookkeeping over its frames' jobs, restored below as any job.
+                let settings: JobSettings = serde_json::from_str(&row.settings).unwrap_or_default();
+                jobs.insert(
+                    id,
+                    entry_of(&row, placeholder_render(&row), settings.defines, None),
+                );
+                continue;
+            }
             match restore(store, &row, &config.limits) {
                 Ok(r) => {
                     if r.state != row.state {
@@ -319,6 +348,13 @@ impl Farm {
                     saved.insert(id, (JobState::Failed, row.next_start, Some(message)));
                     jobs.insert(id, entry_of(&row, placeholder_render(&row), Vec::new(), None));
                 }
+            }
+        }
+        // Each sequence's frames are scheduled as a group again.
+        for seq in jobs.values().filter(|j: &&JobEntry| !j.frames.is_empty()) {
+            let last = seq.frames.iter().map(|f| f.1).max().unwrap_or(0);
+            for &(_, frame) in &seq.frames {
+                scheduler.set_group(frame, last);
             }
         }
         // Leases granted before the restart: their workers may be rendering them, or holding
@@ -385,7 +421,6 @@ impl Farm {
 
     /// Creates a job from settings already checked against the loaded scene and the limits;
     /// `sum` is its empty sum, allocated by the caller outside the lock.
-    #[allow(clippy::too_many_arguments)]
     pub fn create_job(
         &mut self,
         settings: &JobSettings,
@@ -395,10 +430,39 @@ impl Farm {
         bundle: &str,
         sum: Accumulator,
     ) -> Result<u64, FarmError> {
-        let window = self.window_of(settings);
-        let (width, height) = sum.size();
+        let job = FrameJob {
+            frame: 0,
+            settings: settings.clone(),
+            render,
+            total,
+            sum,
+        };
+        Ok(self.insert_job(job, scene, bundle, None))
+    }
+
+    /// Creates a sequence: one job per frame, in the order given, and the sequence's own job
+    /// that follows them. The frames' jobs are scheduled as a group: a lease goes to the first
+    /// frame with passes left, so frames finish in order and early ones can be looked at first.
+    pub fn create_sequence(
+        &mut self,
+        settings: &JobSettings,
+        frames: Vec<FrameJob>,
+        scene: &str,
+        bundle: &str,
+    ) -> Result<u64, FarmError> {
+        let first = frames
+            .first()
+            .ok_or(FarmError::BadResult("a sequence without frames".into()))?;
         let id = self.next_job;
         self.next_job += 1;
+        let ids: Vec<(u32, u64)> = frames
+            .iter()
+            .enumerate()
+            .map(|(i, f)| (f.frame, id + 1 + i as u64))
+            .collect();
+        let (width, height) = first.sum.size();
+        let total = frames.iter().map(|f| f.total).sum();
+        let render = first.render;
         self.writes.push(Write::InsertJob(NewJob {
             id,
             created_ms: unix_ms(),
@@ -407,9 +471,69 @@ impl Farm {
             scene: scene.to_string(),
             bundle: bundle.to_string(),
             total,
+            window: 1,
+            width,
+            height,
+            frame_of: None,
+            frames: Some(serde_json::to_string(&ids).expect("frames serialise")),
+        }));
+        let row = JobRow {
+            id,
+            created_ms: unix_ms(),
+            settings: String::new(),
+            render: String::new(),
+            scene: scene.to_string(),
+            bundle: bundle.to_string(),
+            total,
+            window: 1,
+            next_start: 0,
+            state: JobState::Queued,
+            message: None,
+            width,
+            height,
+            image_passes: 0,
+            stats: JobStats::default(),
+            frame_of: None,
+            frames: None,
+        };
+        let mut entry = entry_of(&row, render, settings.defines.clone(), None);
+        entry.frames = ids.clone();
+        self.jobs.insert(id, entry);
+        let last = ids.last().map_or(id, |f| f.1);
+        for job in frames {
+            let frame = job.frame;
+            let child = self.insert_job(job, scene, bundle, Some((id, frame)));
+            self.scheduler.set_group(child, last);
+        }
+        Ok(id)
+    }
+
+    /// Creates one job (an image, or a frame of sequence `frame_of.0`).
+    fn insert_job(&mut self, job: FrameJob, scene: &str, bundle: &str, frame_of: Option<(u64, u32)>) -> u64 {
+        let FrameJob {
+            settings,
+            render,
+            total,
+            sum,
+            ..
+        } = job;
+        let window = self.window_of(&settings);
+        let (width, height) = sum.size();
+        let id = self.next_job;
+        self.next_job += 1;
+        self.writes.push(Write::InsertJob(NewJob {
+            id,
+            created_ms: unix_ms(),
+            settings: serde_json::to_string(&settings).expect("settings serialise"),
+            render: serde_json::to_string(&render).expect("settings serialise"),
+            scene: scene.to_string(),
+            bundle: bundle.to_string(),
+            total,
             window,
             width,
             height,
+            frame_of,
+            frames: None,
         }));
         self.scheduler
             .add_job(id, total, window, 0, &[], JobState::Queued);
@@ -432,6 +556,8 @@ impl Farm {
             height,
             image_passes: 0,
             stats: JobStats::default(),
+            frame_of,
+            frames: None,
         };
         self.jobs.insert(
             id,
@@ -442,7 +568,7 @@ impl Farm {
                 Some(Arc::new(Mutex::new(sum))),
             ),
         );
-        Ok(id)
+        id
     }
 
     fn new_key(&self) -> String {
@@ -478,6 +604,11 @@ impl Farm {
         }));
         let job = self.jobs.get_mut(&g.job_id).expect("scheduled jobs are known");
         job.started.get_or_insert_with(Instant::now);
+        let sequence = job.frame_of.map(|f| f.0);
+        if let Some(seq) = sequence.and_then(|s| self.jobs.get_mut(&s)) {
+            seq.started.get_or_insert_with(Instant::now);
+        }
+        let job = &self.jobs[&g.job_id];
         let lease = Lease {
             lease_id: g.lease_id,
             job_id: g.job_id,
@@ -655,8 +786,15 @@ impl Farm {
 
     /// Cancels a job.
     pub fn cancel(&mut self, id: u64) -> Result<JobStatus, FarmError> {
-        if !self.scheduler.cancel(id) {
-            return Err(FarmError::NoJob(id));
+        let frames: Vec<u64> = match self.jobs.get(&id) {
+            Some(j) if !j.frames.is_empty() => j.frames.iter().map(|f| f.1).collect(),
+            Some(_) => vec![id],
+            None => return Err(FarmError::NoJob(id)),
+        };
+        for &job in &frames {
+            if !self.scheduler.cancel(job) {
+                return Err(FarmError::NoJob(job));
+            }
         }
         let void: Vec<u64> = self
             .lease_keys
@@ -667,7 +805,9 @@ impl Farm {
         for lease in void {
             self.forget_lease(lease)?;
         }
-        self.persist_progress(id)?;
+        for job in frames {
+            self.persist_progress(job)?;
+        }
         self.status(id).ok_or(FarmError::NoJob(id))
     }
 
@@ -723,12 +863,103 @@ impl Farm {
             stats,
         });
         self.saved.insert(id, (state, next_start, message));
+        if let Some((sequence, _)) = self.jobs.get(&id).and_then(|j| j.frame_of) {
+            self.persist_sequence(sequence);
+        }
         Ok(())
+    }
+
+    /// Writes a sequence's state and counters, as its frames make them.
+    fn persist_sequence(&mut self, id: u64) {
+        let Some(status) = self.status(id) else {
+            return;
+        };
+        let Some(seq) = self.jobs.get_mut(&id) else {
+            return;
+        };
+        if status.state.is_final() {
+            seq.finished.get_or_insert_with(Instant::now);
+        }
+        let stats = JobStats {
+            elapsed_ms: seq.elapsed().as_millis() as u64,
+            batches_received: status.batches_received,
+            bytes_received: status.bytes_received,
+        };
+        self.writes.push(Write::Progress {
+            id,
+            next_start: 0,
+            state: status.state,
+            message: status.message,
+            stats,
+        });
+    }
+
+    /// A sequence's status: its frames' summed, its state from theirs.
+    fn sequence_status(&self, id: u64, seq: &JobEntry) -> JobStatus {
+        let frames: Vec<(u32, JobStatus)> = seq
+            .frames
+            .iter()
+            .filter_map(|&(f, job)| Some((f, self.status(job)?)))
+            .collect();
+        let all = |s: JobState| frames.iter().all(|(_, f)| f.state == s);
+        let failed = frames.iter().find(|(_, f)| f.state == JobState::Failed);
+        let state = if let Some((_, _)) = failed {
+            JobState::Failed
+        } else if all(JobState::Done) {
+            JobState::Done
+        } else if frames.iter().all(|(_, f)| f.state.is_final()) {
+            JobState::Cancelled
+        } else if all(JobState::Queued) {
+            JobState::Queued
+        } else {
+            JobState::Running
+        };
+        let message = failed.map(|(n, f)| format!("frame {n}: {}", f.message.as_deref().unwrap_or("failed")));
+        let sum = |get: fn(&JobStatus) -> u64| frames.iter().map(|(_, f)| get(f)).sum::<u64>();
+        let done = sum(|f| f.iterations_done);
+        let mut workers: Vec<String> = frames.iter().flat_map(|(_, f)| f.workers.clone()).collect();
+        workers.sort();
+        workers.dedup();
+        let elapsed = seq.elapsed().as_secs_f64();
+        JobStatus {
+            id,
+            state,
+            iterations_done: done,
+            iterations_total: sum(|f| f.iterations_total),
+            checkpoint_iterations: sum(|f| f.checkpoint_iterations),
+            workers,
+            workers_present: self.scheduler.workers_present(),
+            elapsed_seconds: elapsed,
+            rate: if elapsed > 0.0 { done as f64 / elapsed } else { 0.0 },
+            integrator: seq.render.method.name().to_string(),
+            width: seq.width,
+            height: seq.height,
+            message,
+            created_unix_ms: seq.created_ms,
+            batches_received: sum(|f| f.batches_received),
+            bytes_received: sum(|f| f.bytes_received),
+            sequence: None,
+            frame: None,
+            frames: frames
+                .iter()
+                .map(|(n, f)| FrameStatus {
+                    frame: *n,
+                    job: f.id,
+                    state: f.state,
+                    iterations_done: f.iterations_done,
+                    iterations_total: f.iterations_total,
+                    checkpoint_iterations: f.checkpoint_iterations,
+                })
+                .collect(),
+        }
     }
 
     /// A job's status.
     pub fn status(&self, id: u64) -> Option<JobStatus> {
         let job = self.jobs.get(&id)?;
+        if !job.frames.is_empty() {
+            return Some(self.sequence_status(id, job));
+        }
         let (state, done, total, message) = self.reported_state(id)?;
         let elapsed = job.elapsed().as_secs_f64();
         let rate = if elapsed > 0.0 { done as f64 / elapsed } else { 0.0 };
@@ -749,6 +980,9 @@ impl Farm {
             created_unix_ms: job.created_ms,
             batches_received: job.batches_received,
             bytes_received: job.bytes_received,
+            sequence: job.frame_of.map(|f| f.0),
+            frame: job.frame_of.map(|f| f.1),
+            frames: Vec::new(),
         })
     }
 
@@ -762,9 +996,13 @@ impl Farm {
         self.scheduler.workers_present()
     }
 
-    /// Every job, oldest first.
+    /// Every job, oldest first; a sequence's frames are listed in its status, not here.
     pub fn list(&self) -> Vec<JobStatus> {
-        self.jobs.keys().filter_map(|&id| self.status(id)).collect()
+        self.jobs
+            .iter()
+            .filter(|(_, j)| j.frame_of.is_none())
+            .filter_map(|(&id, _)| self.status(id))
+            .collect()
     }
 
     /// Jobs that hold their sum in memory (those that may still receive results).
@@ -773,8 +1011,17 @@ impl Farm {
     }
 
     /// The path of a job's latest checkpoint image.
+    /// Of a sequence: its latest frame (in the order given) with an image.
     pub fn image(&self, id: u64, ext: &str) -> Result<std::path::PathBuf, FarmError> {
         let job = self.jobs.get(&id).ok_or(FarmError::NoJob(id))?;
+        if !job.frames.is_empty() {
+            return job
+                .frames
+                .iter()
+                .rev()
+                .find_map(|&(_, frame)| self.image(frame, ext).ok())
+                .ok_or(FarmError::NoImage(id));
+        }
         let path = self.layout.image_path(id, ext);
         if job.image_passes > 0 && path.exists() {
             Ok(path)
@@ -856,6 +1103,12 @@ fn entry_of(
         bytes_received: row.stats.bytes_received,
         noise: Vec::new(),
         noise_saved: 0,
+        frame_of: row.frame_of,
+        frames: row
+            .frames
+            .as_deref()
+            .and_then(|f| serde_json::from_str(f).ok())
+            .unwrap_or_default(),
     }
 }
 

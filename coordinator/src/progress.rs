@@ -73,6 +73,14 @@ impl Reporter {
         }
     }
 
+    /// Prints a line above the bar (or as a log line).
+    pub fn println(&self, line: &str) {
+        match &self.bar {
+            Some(bar) => bar.println(line),
+            None => eprintln!("{line}"),
+        }
+    }
+
     /// Clears the bar.
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {

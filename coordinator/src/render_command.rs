@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use photonfarm::film::FilmSum;
-use photonfarm::frames::{frame_defines, frame_path, frame_seed, parse_frames};
+use photonfarm::frames::{frame_path, parse_frames};
 use photonfarm::job::JobSettings;
 use photonfarm::render::{Method, Renderer};
 use photonfarm::scene::Scene;
@@ -22,7 +22,7 @@ use crate::progress::Reporter;
 use crate::resume;
 use crate::scheduler::{JobState, Scheduler, SchedulerConfig};
 
-/// Renders `args.job.scene` to `args.out`, or each frame of `args.frames` to its name.
+/// Renders `args.job.scene` to `args.out`, or each frame of `--frames` to its name.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     // Check everything cheap first: a typo must not cost a long render.
     check_output(&args.out)?;
@@ -40,7 +40,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     }
     let settings = args.job.settings()?;
     let interrupted = interruption_flag();
-    let Some(spec) = &args.frames else {
+    let Some(spec) = &settings.frames else {
         return render_image(args, &settings, &args.out, args.resume, &interrupted);
     };
     let frames = parse_frames(spec)?;
@@ -48,10 +48,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let plans = frames
         .iter()
         .map(|&frame| {
-            let mut s = settings.clone();
-            s.defines = frame_defines(&settings.defines, &frames, frame)?;
-            s.seed = frame_seed(settings.seed, frame);
-            Ok((frame, frame_path(&args.out, frame), s))
+            Ok((
+                frame,
+                frame_path(&args.out, frame),
+                settings.for_frame(&frames, frame)?,
+            ))
         })
         .collect::<Result<Vec<_>, photonfarm::frames::FrameError>>()?;
     for (i, (frame, out, frame_settings)) in plans.iter().enumerate() {

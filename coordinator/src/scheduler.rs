@@ -121,6 +121,8 @@ struct JobSched {
     rates: HashMap<String, f64>,
     /// Image pixels (the size of each result), for the batch length rule; 0 if unknown.
     pixels: u64,
+    /// Of a frame of a sequence: the last job of its group (see [`Scheduler::set_group`]).
+    group_end: Option<u64>,
 }
 
 /// The scheduler of all jobs.
@@ -207,6 +209,7 @@ impl Scheduler {
                 last_error: None,
                 rates: HashMap::new(),
                 pixels: 0,
+                group_end: None,
             },
         );
     }
@@ -216,6 +219,15 @@ impl Scheduler {
     pub fn set_pixels(&mut self, job_id: u64, pixels: u64) {
         if let Some(job) = self.jobs.get_mut(&job_id) {
             job.pixels = pixels;
+        }
+    }
+
+    /// Makes a job a frame of a sequence whose frames are the jobs up to `group_end` (ids in
+    /// frame order): the frames take one turn together, each turn going to the first frame
+    /// with passes left, so frames finish in order.
+    pub fn set_group(&mut self, job_id: u64, group_end: u64) {
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            job.group_end = Some(group_end);
         }
     }
 
@@ -266,7 +278,9 @@ impl Scheduler {
                     arrived: None,
                 },
             );
-            self.turn = job_id + 1;
+            // A group takes one turn: the next lease goes past its last job, and the group's
+            // next turn starts again at its first frame with passes left.
+            self.turn = job.group_end.unwrap_or(job_id).max(job_id) + 1;
             return Some(Grant {
                 lease_id,
                 job_id,

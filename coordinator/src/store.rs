@@ -78,6 +78,10 @@ pub struct JobRow {
     pub image_passes: u64,
     /// What the job's status counts, kept across restarts.
     pub stats: JobStats,
+    /// Of a frame of a sequence: the sequence's job and the frame number.
+    pub frame_of: Option<(u64, u32)>,
+    /// Of a sequence: its frames' (frame number, job), as JSON.
+    pub frames: Option<String>,
 }
 
 /// A job's counters, stored so that its elapsed time, rate and batch count go on after a
@@ -145,6 +149,10 @@ pub struct NewJob {
     pub width: u32,
     /// Image size.
     pub height: u32,
+    /// Of a frame of a sequence: the sequence's job and the frame number.
+    pub frame_of: Option<(u64, u32)>,
+    /// Of a sequence: its frames' (frame number, job), as JSON.
+    pub frames: Option<String>,
 }
 
 /// One change to the database. A farm event returns the list of its writes, and
@@ -430,12 +438,21 @@ impl Store {
         )?;
         // Columns added after the first release (an error means the column is there already):
         // passes in each job's latest image, and its counters.
-        for column in ["image_passes", "elapsed_ms", "batches_received", "bytes_received"] {
+        for column in [
+            "image_passes",
+            "elapsed_ms",
+            "batches_received",
+            "bytes_received",
+            "sequence",
+            "frame",
+        ] {
             let _ = db.execute(
                 &format!("ALTER TABLE jobs ADD COLUMN {column} INTEGER NOT NULL DEFAULT 0"),
                 [],
             );
         }
+        // Sequences' frame lists (NULL for every other job).
+        let _ = db.execute("ALTER TABLE jobs ADD COLUMN frames TEXT", []);
         // The lease that delivered each stored batch (0: stored before, under the old name).
         // Added only where missing, and an error here is one: without the column no batch
         // could be read back, and every job with stored batches would fail at restore.
@@ -521,8 +538,8 @@ impl Store {
                 Write::InsertJob(job) => {
                     tx.execute(
                         "INSERT INTO jobs (id, created_ms, settings, render, scene, bundle, total, window,
-                                           next_start, state, width, height)
-                         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, 0, 'queued', ?9, ?10)",
+                                           next_start, state, width, height, sequence, frame, frames)
+                         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, 0, 'queued', ?9, ?10, ?11, ?12, ?13)",
                         params![
                             job.id as i64,
                             job.created_ms as i64,
@@ -534,6 +551,9 @@ impl Store {
                             job.window as i64,
                             job.width,
                             job.height,
+                            job.frame_of.map_or(0, |f| f.0) as i64,
+                            job.frame_of.map_or(0, |f| f.1),
+                            job.frames,
                         ],
                     )?;
                     // Its folder now, not at its first batch: folders are what keep ids from
@@ -696,7 +716,8 @@ impl Store {
     pub fn load_jobs(&self) -> Result<Vec<JobRow>, StoreError> {
         let mut stmt = self.db.prepare(
             "SELECT id, created_ms, settings, render, scene, bundle, total, window, next_start, state, message,
-                    width, height, image_passes, elapsed_ms, batches_received, bytes_received
+                    width, height, image_passes, elapsed_ms, batches_received, bytes_received,
+                    sequence, frame, frames
              FROM jobs ORDER BY id",
         )?;
         let rows = stmt.query_map([], |r| {
@@ -720,6 +741,11 @@ impl Store {
                     batches_received: r.get::<_, i64>(15)? as u64,
                     bytes_received: r.get::<_, i64>(16)? as u64,
                 },
+                frame_of: match r.get::<_, i64>(17)? {
+                    0 => None,
+                    sequence => Some((sequence as u64, r.get::<_, u32>(18)?)),
+                },
+                frames: r.get(19)?,
             })
         })?;
         Ok(rows.collect::<Result<_, _>>()?)
@@ -810,6 +836,8 @@ mod tests {
                 window: 4,
                 width: 2,
                 height: 2,
+                frame_of: None,
+                frames: None,
             };
             s.apply(&[Write::InsertJob(job)]).unwrap();
             id

@@ -456,3 +456,93 @@ fn a_scene_reading_outside_its_folder_submits_and_gives_the_local_bytes() {
         "farm and local bytes differ"
     );
 }
+
+/// Issue 28: a 6-frame sequence (ramped `-D`, the scene's camera and a sphere moving) on two
+/// workers, its coordinator SIGKILLed once some frames are done and restarted: every frame
+/// fetched has the bytes of the same frame of `coordinator render --frames`, and frames
+/// finish in order.
+#[test]
+fn a_sequence_survives_a_sigkill_and_gives_the_frames_of_render_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let bind = support::fixed_loopback_address();
+    let flags = ["--batch-seconds", "0.3", "--lease-timeout", "2"];
+    let (mut coordinator, url) = serve(&data, &bind, &flags);
+    let _w: Vec<_> = (0..2)
+        .map(|i| worker(&url, &format!("w{i}"), &dir.path().join(format!("c{i}"))))
+        .collect();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/turntable.xml");
+    let job: &[&str] = &[
+        "--frames",
+        "1-6",
+        "-D",
+        "angle=-20:20",
+        "-D",
+        "roll=-0.5:0.4",
+        "-D",
+        "res=32",
+        "--spp",
+        "300",
+        "--seed",
+        "2",
+        "--checkpoint-every",
+        "100",
+    ];
+    let id = submit_of(&url, &scene, job);
+    let frames_done = |s: &Value| -> Vec<u64> {
+        s["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|f| f["state"] == "done")
+            .map(|f| f["frame"].as_u64().unwrap())
+            .collect()
+    };
+    wait_until("two frames to finish", Duration::from_secs(120), || {
+        status(&url, id).is_some_and(|s| frames_done(&s).len() >= 2)
+    });
+    let seen = status(&url, id).unwrap();
+    coordinator.sigkill();
+    let done = frames_done(&seen);
+    assert!(
+        done.len() < 6,
+        "the sequence finished before the coordinator could be killed"
+    );
+    // In order: the first frames are the ones done.
+    assert_eq!(done, (1..=done.len() as u64).collect::<Vec<_>>(), "{seen}");
+    let (_coordinator, again) = serve(&data, &bind, &flags);
+    assert_eq!(url, again);
+    let s = wait_done(&url, id);
+    assert_eq!(s["frames"].as_array().unwrap().len(), 6, "{s}");
+    assert_eq!(s["iterations_done"], 1800, "{s}");
+    let out = dir.path().join("farm-#.exr");
+    let o = Command::new(coordinator_bin())
+        .args([
+            "fetch",
+            "--to",
+            &url,
+            &id.to_string(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let local = dir.path().join("local-#.exr");
+    let o = Command::new(coordinator_bin())
+        .args([
+            "render",
+            scene.to_str().unwrap(),
+            "--out",
+            local.to_str().unwrap(),
+        ])
+        .args(job)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in 1..=6 {
+        let farm = std::fs::read(dir.path().join(format!("farm-{f}.exr"))).unwrap();
+        let here = std::fs::read(dir.path().join(format!("local-{f}.exr"))).unwrap();
+        assert!(farm == here, "frame {f} differs from coordinator render --frames");
+    }
+}
