@@ -6,8 +6,8 @@
 # 1. Installs Debian's slurm-wlm and munge if they are missing, then starts munged, slurmctld and
 #    slurmd itself (there is no systemd), each with its own key, socket, ports and folders under
 #    a temporary directory, so nothing of an existing Slurm or munge is touched.
-# 2. Starts a coordinator, submits an SPPM job, and renders it on a 2-task array submitted with
-#    sbatch: the image must have the bytes of `coordinator render` with the same settings.
+# 2. Starts a coordinator, submits a 4-frame SPPM sequence, and renders it on a 2-task array
+#    submitted with sbatch: each frame must have the bytes of `coordinator render --frames`.
 # 3. Submits a longer job, and `scancel`s the array while it renders. Slurm sends SIGTERM: each
 #    worker must deliver (or release) the batch under way, so no lease is left to expire (the
 #    lease timeout is 120 s; the check is made within 20 s). A second array then finishes the
@@ -120,16 +120,19 @@ status() { curl -sf -H "Authorization: Bearer $PHOTONFARM_TOKEN" "$URL/api/jobs/
 field() { python3 -c "import json,sys; print(json.load(sys.stdin)[\"$1\"])"; }
 SCENE=$ROOT/tests/refs/cbox-spheres.xml
 
-echo "== an SPPM job on a 2-task array"
-SPPM=(--integrator sppm --iterations 24 --photons 20000 -D res=64 --seed 3)
-JOB=$("$BIN/coordinator" submit --to "$URL" "$SCENE" "${SPPM[@]}" --checkpoint-every 24)
+echo "== an SPPM sequence of 4 frames on a 2-task array"
+SEQ=(--frames 1-4 -D angle=-20:20 -D roll=-0.5:0.4 --integrator sppm --iterations 12
+     --photons 20000 -D res=48 --seed 3 --checkpoint-every 12)
+JOB=$("$BIN/coordinator" submit --to "$URL" "$ROOT/scenes/turntable.xml" "${SEQ[@]}")
 ARRAY=$(array 2)
 echo "job $JOB, array $ARRAY"
-"$BIN/coordinator" wait --to "$URL" "$JOB" --out "$WORK/farm.exr"
+"$BIN/coordinator" wait --to "$URL" "$JOB" --out "$WORK/farm-#.exr"
 squeue -h -j "$ARRAY" -o "%i %T" | sed 's/^/  task /'
-"$BIN/coordinator" render "$SCENE" "${SPPM[@]}" --checkpoint-every 24 --out "$WORK/local.exr" 2>/dev/null
-cmp "$WORK/farm.exr" "$WORK/local.exr" || fail "the farm's image differs from coordinator render's"
-echo "same bytes as coordinator render"
+"$BIN/coordinator" render "$ROOT/scenes/turntable.xml" "${SEQ[@]}" --out "$WORK/local-#.exr" 2>/dev/null
+for f in 1 2 3 4; do
+    cmp "$WORK/farm-$f.exr" "$WORK/local-$f.exr" || fail "frame $f differs from coordinator render --frames"
+done
+echo "every frame has the bytes of coordinator render --frames"
 scancel --quiet "$ARRAY"
 
 echo "== scancel while the array renders"
