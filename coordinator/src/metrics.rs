@@ -97,6 +97,19 @@ impl Metrics {
                 .set(n as i64);
         }
         registry.register("jobs", "Jobs by state", by_state);
+        let frames = Family::<StateLabels, IntGauge>::default();
+        for state in ["queued", "running", "done", "failed", "cancelled"] {
+            let n = farm
+                .jobs
+                .iter()
+                .flat_map(|j| &j.frames)
+                .filter(|f| f.state.as_str() == state)
+                .count();
+            frames
+                .get_or_create(&StateLabels { state: state.into() })
+                .set(n as i64);
+        }
+        registry.register("frames", "Frames of sequences by state", frames);
 
         let done = Family::<JobLabels, IntGauge>::default();
         let total = Family::<JobLabels, IntGauge>::default();

@@ -908,6 +908,22 @@ mod tests {
     }
 
     #[test]
+    fn a_sequence_takes_one_turn_and_each_turn_goes_to_its_first_frame_with_passes() {
+        let mut s = sched();
+        // A job, then a sequence of three frames (jobs 2 to 4), then another job.
+        for id in 1..=5 {
+            s.add_job(id, 2, 100, 0, &[], JobState::Queued);
+        }
+        for id in 2..=4 {
+            s.set_group(id, 4);
+        }
+        let jobs: Vec<u64> = (0..10).map(|_| s.lease("w", 0).unwrap().job_id).collect();
+        // While jobs 1 and 5 have passes, each round gives them a lease each and the sequence
+        // one, to its first frame with passes left; the frames finish in order.
+        assert_eq!(jobs, [1, 2, 5, 1, 2, 5, 3, 3, 4, 4]);
+    }
+
+    #[test]
     fn cancel_and_close() {
         let mut s = sched();
         s.add_job(1, 100, 10, 0, &[], JobState::Queued);

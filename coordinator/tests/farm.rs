@@ -515,6 +515,23 @@ fn a_sequence_survives_a_sigkill_and_gives_the_frames_of_render_frames() {
     let s = wait_done(&url, id);
     assert_eq!(s["frames"].as_array().unwrap().len(), 6, "{s}");
     assert_eq!(s["iterations_done"], 1800, "{s}");
+    let metrics = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(async {
+            reqwest::get(format!("{url}/metrics"))
+                .await
+                .unwrap()
+                .text()
+                .await
+                .unwrap()
+        });
+    assert!(
+        metrics.contains("photonfarm_frames{state=\"done\"} 6"),
+        "{metrics}"
+    );
+    assert!(metrics.contains("photonfarm_jobs{state=\"done\"} 1"), "{metrics}");
     let out = dir.path().join("farm-#.exr");
     let o = Command::new(coordinator_bin())
         .args([
