@@ -62,16 +62,24 @@ fn is_plain_relative(p: &Path) -> bool {
 /// deepest common folder, so that the names the scene uses (`..` included) resolve the same
 /// inside the bundle. Returns the archive and the scene's path inside it.
 pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<(Vec<u8>, PathBuf), BundleError> {
+    let (archive, mut scenes) = pack_scenes(&[scene], files)?;
+    Ok((archive, scenes.remove(0)))
+}
+
+/// [`pack`] for several scenes sharing one bundle (the frames of a sequence given as files):
+/// `files` are what all of them read. Returns the archive and each scene's path inside it.
+pub fn pack_scenes(scenes: &[&Path], files: &[PathBuf]) -> Result<(Vec<u8>, Vec<PathBuf>), BundleError> {
     let canonical = |p: &Path| {
         p.canonicalize()
             .map_err(|e| BundleError::Io(p.display().to_string(), e))
     };
-    let scene = canonical(scene)?;
-    let mut all = vec![scene.clone()];
+    let scenes: Vec<PathBuf> = scenes.iter().map(|s| canonical(s)).collect::<Result<_, _>>()?;
+    let mut all = scenes.clone();
     for f in files {
         all.push(canonical(f)?);
     }
-    let mut root = scene.parent().unwrap_or(Path::new("/")).to_path_buf();
+    let first = scenes.first().map(PathBuf::as_path).unwrap_or(Path::new("/"));
+    let mut root = first.parent().unwrap_or(Path::new("/")).to_path_buf();
     for f in &all {
         while !f.starts_with(&root) {
             root = root.parent().unwrap_or(Path::new("/")).to_path_buf();
@@ -97,13 +105,15 @@ pub fn pack(scene: &Path, files: &[PathBuf]) -> Result<(Vec<u8>, PathBuf), Bundl
     let archive = builder
         .into_inner()
         .map_err(|e| BundleError::Io("archive".into(), e))?;
-    Ok((
-        archive,
-        scene
-            .strip_prefix(&root)
-            .expect("under the common folder")
-            .to_path_buf(),
-    ))
+    let inside = scenes
+        .iter()
+        .map(|s| {
+            s.strip_prefix(&root)
+                .expect("under the common folder")
+                .to_path_buf()
+        })
+        .collect();
+    Ok((archive, inside))
 }
 
 /// Unpacks `bytes` into `dest` (created if missing), refusing anything but plain files and

@@ -105,6 +105,10 @@ pub struct JobSettings {
     /// rendered with [`JobSettings::for_frame`]'s settings. None: one image.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frames: Option<String>,
+    /// A sequence given as scene files: frame i is the i-th of these (paths inside the
+    /// bundle), and `frames` lists as many frames. Empty: every frame is the job's scene.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scenes: Vec<String>,
 }
 
 /// Why settings cannot be used.
@@ -161,6 +165,7 @@ impl JobSettings {
             defines: crate::frames::frame_defines(&self.defines, frames, frame)?,
             seed: crate::frames::frame_seed(self.seed, frame),
             frames: None,
+            scenes: Vec::new(),
             ..self.clone()
         })
     }

@@ -377,8 +377,8 @@ fn accept_bundle(
             limits.max_geometry
         )));
     }
-    let scene_path = files_dir.join(&scene_rel);
-    let check = |settings: &JobSettings| {
+    let check = |scene_rel: &FsPath, settings: &JobSettings| {
+        let scene_path = files_dir.join(scene_rel);
         match &state.checker {
             Some(program) => check_in_child(
                 program,
@@ -425,13 +425,28 @@ fn accept_bundle(
         None => None,
         Some(spec) => {
             let frames = parse_frames(spec).map_err(|e| bad(e.to_string()))?;
+            // A sequence given as files: frame i is the i-th, each in the bundle.
+            if !settings.scenes.is_empty() && settings.scenes.len() != frames.len() {
+                return Err(bad(format!(
+                    "{} scene files for {} frames: a sequence of files has one frame per file",
+                    settings.scenes.len(),
+                    frames.len()
+                )));
+            }
             let mut checked = Vec::with_capacity(frames.len());
             let mut pixels = 0u64;
-            for &frame in &frames {
+            for (i, &frame) in frames.iter().enumerate() {
+                let scene = match settings.scenes.get(i) {
+                    Some(s) => PathBuf::from(s),
+                    None => scene_rel.clone(),
+                };
+                if !files.contains(&scene) {
+                    return Err(bad(format!("the bundle has no file \"{}\"", scene.display())));
+                }
                 let frame_settings = settings
                     .for_frame(&frames, frame)
                     .map_err(|e| bad(e.to_string()))?;
-                let c = check(&frame_settings)?;
+                let c = check(&scene, &frame_settings)?;
                 let px = c.width as u64 * c.height as u64;
                 pixels += px;
                 // Judged from the first frame before checking the others: each check loads
@@ -445,14 +460,14 @@ fn accept_bundle(
                         limits.job.max_pixels
                     )));
                 }
-                checked.push((frame, frame_settings, c));
+                checked.push((frame, scene, frame_settings, c));
             }
             Some(checked)
         }
     };
     let checked = match &frames {
-        Some(f) => f[0].2.clone(),
-        None => check(&settings)?,
+        Some(f) => f[0].3.clone(),
+        None => check(&scene_rel, &settings)?,
     };
     let total = checked.total;
     // Everything that takes time or memory, before the lock: the empty sums, the archive and
@@ -463,8 +478,9 @@ fn accept_bundle(
         .then(|| Accumulator::empty(checked.width, checked.height, window));
     let frames: Option<Vec<FrameJob>> = frames.map(|f| {
         f.into_iter()
-            .map(|(frame, settings, c)| FrameJob {
+            .map(|(frame, scene, settings, c)| FrameJob {
                 frame,
+                scene: scene.to_string_lossy().into_owned(),
                 settings,
                 render: c.render,
                 total: c.total,

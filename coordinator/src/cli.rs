@@ -194,6 +194,10 @@ pub struct ConvergeArgs {
 pub struct JobArgs {
     /// The Mitsuba 3 XML scene file.
     pub scene: PathBuf,
+    /// More scene files: the files are then a sequence, one frame each, numbered from 1 in
+    /// the order given (`render`: `--out` names them with `#`; `submit`: one bundle for all).
+    #[arg(value_name = "MORE_SCENES")]
+    pub more_scenes: Vec<PathBuf>,
     /// Rendering method [default: the scene's <integrator>: path and volpath render with
     /// path, direct with direct, sppm with sppm, ptracer with ptracer; path if it has none].
     #[arg(long, value_enum)]
@@ -284,6 +288,15 @@ impl JobArgs {
                 }
             }
         }
+        let frames = match (&self.frames, self.more_scenes.len()) {
+            (Some(_), n) if n > 0 => {
+                anyhow::bail!(
+                    "several scene files are a sequence of their own: give --frames or several files, not both"
+                )
+            }
+            (_, 0) => self.frames.clone(),
+            (_, n) => Some(format!("1-{}", n + 1)),
+        };
         Ok(JobSettings {
             integrator,
             passes,
@@ -296,7 +309,8 @@ impl JobArgs {
             defines: self.define.clone(),
             seed: self.seed,
             checkpoint_every: self.checkpoint_every,
-            frames: self.frames.clone(),
+            frames,
+            scenes: Vec::new(),
         })
     }
 }

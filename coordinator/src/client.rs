@@ -137,19 +137,32 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
         check_output(out)?;
     }
     let client = ApiClient::for_connection(&args.conn)?;
-    let settings = args.job.settings()?;
+    let mut settings = args.job.settings()?;
     // Load locally first: a broken scene fails here, with its file and line, before uploading
-    // (a sequence's first frame; the coordinator checks every frame).
-    let first = match &settings.frames {
-        Some(spec) => {
-            let frames = photonfarm::frames::parse_frames(spec)?;
-            settings.for_frame(&frames, frames[0])?
-        }
-        None => settings.clone(),
+    // (each file of a sequence given as files, at its frame's settings; of a sequence of one
+    // scene, its first frame: the coordinator checks every frame).
+    let frames = match &settings.frames {
+        Some(spec) => photonfarm::frames::parse_frames(spec)?,
+        None => Vec::new(),
     };
-    let scene = Scene::load(&args.job.scene, &first.defines)?;
-    let (bundle, scene_in_bundle) = photonfarm::bundle::pack(&args.job.scene, &scene.files)?;
-    let scene_name = scene_in_bundle.to_string_lossy().into_owned();
+    let paths: Vec<&std::path::Path> = std::iter::once(&args.job.scene)
+        .chain(&args.job.more_scenes)
+        .map(|p| p.as_path())
+        .collect();
+    let mut files = Vec::new();
+    for (i, path) in paths.iter().enumerate() {
+        let frame_settings = match frames.get(i) {
+            Some(&f) => settings.for_frame(&frames, f)?,
+            None => settings.clone(),
+        };
+        files.extend(Scene::load(path, &frame_settings.defines)?.files);
+    }
+    let (bundle, inside) = photonfarm::bundle::pack_scenes(&paths, &files)?;
+    let names: Vec<String> = inside.iter().map(|p| p.to_string_lossy().into_owned()).collect();
+    let scene_name = names[0].clone();
+    if names.len() > 1 {
+        settings.scenes = names;
+    }
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let job = client.submit(bundle, &scene_name, &settings).await?;

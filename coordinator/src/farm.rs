@@ -117,6 +117,8 @@ struct JobEntry {
 pub struct FrameJob {
     /// The frame number.
     pub frame: u32,
+    /// Its scene's path in the bundle.
+    pub scene: String,
     /// The frame's settings ([`JobSettings::for_frame`]).
     pub settings: JobSettings,
     /// What workers run for it.
@@ -432,12 +434,13 @@ impl Farm {
     ) -> Result<u64, FarmError> {
         let job = FrameJob {
             frame: 0,
+            scene: scene.to_string(),
             settings: settings.clone(),
             render,
             total,
             sum,
         };
-        Ok(self.insert_job(job, scene, bundle, None))
+        Ok(self.insert_job(job, bundle, None))
     }
 
     /// Creates a sequence: one job per frame, in the order given, and the sequence's own job
@@ -502,21 +505,23 @@ impl Farm {
         let last = ids.last().map_or(id, |f| f.1);
         for job in frames {
             let frame = job.frame;
-            let child = self.insert_job(job, scene, bundle, Some((id, frame)));
+            let child = self.insert_job(job, bundle, Some((id, frame)));
             self.scheduler.set_group(child, last);
         }
         Ok(id)
     }
 
     /// Creates one job (an image, or a frame of sequence `frame_of.0`).
-    fn insert_job(&mut self, job: FrameJob, scene: &str, bundle: &str, frame_of: Option<(u64, u32)>) -> u64 {
+    fn insert_job(&mut self, job: FrameJob, bundle: &str, frame_of: Option<(u64, u32)>) -> u64 {
         let FrameJob {
+            scene,
             settings,
             render,
             total,
             sum,
             ..
         } = job;
+        let scene = scene.as_str();
         let window = self.window_of(&settings);
         let (width, height) = sum.size();
         let id = self.next_job;

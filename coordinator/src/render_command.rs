@@ -41,8 +41,19 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let settings = args.job.settings()?;
     let interrupted = interruption_flag();
     let Some(spec) = &settings.frames else {
-        return render_image(args, &settings, &args.out, args.resume, &interrupted);
+        return render_image(
+            args,
+            &args.job.scene,
+            &settings,
+            &args.out,
+            args.resume,
+            &interrupted,
+        );
     };
+    let files: Vec<&Path> = std::iter::once(&args.job.scene)
+        .chain(&args.job.more_scenes)
+        .map(PathBuf::as_path)
+        .collect();
     let frames = parse_frames(spec)?;
     // Every frame's parameters first: a bad ramp fails before the first frame renders.
     let plans = frames
@@ -56,6 +67,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         })
         .collect::<Result<Vec<_>, photonfarm::frames::FrameError>>()?;
     for (i, (frame, out, frame_settings)) in plans.iter().enumerate() {
+        // Several files: frame i is the i-th file; else every frame is the scene.
+        let scene = if files.len() > 1 { files[i] } else { files[0] };
         // --resume goes on from the first frame not finished: a finished frame has its image
         // and no sums beside it.
         let sums = resume::path_for(out);
@@ -70,6 +83,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         if !done {
             render_image(
                 args,
+                scene,
                 frame_settings,
                 out,
                 args.resume && sums.exists(),
@@ -83,12 +97,13 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 /// Renders one image (a still, or one frame of a sequence) to `out`.
 fn render_image(
     args: &RenderArgs,
+    scene_path: &Path,
     settings: &JobSettings,
     out: &Path,
     resume: bool,
     interrupted: &Arc<AtomicBool>,
 ) -> anyhow::Result<()> {
-    let scene = Scene::load(&args.job.scene, &settings.defines)?;
+    let scene = Scene::load(scene_path, &settings.defines)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
@@ -127,7 +142,7 @@ fn render_image(
         .context("cannot start the render threads")?;
     eprintln!(
         "rendering {} ({}x{}, {} shapes, {} lights) with {threads} thread(s)",
-        args.job.scene.display(),
+        scene_path.display(),
         scene.width(),
         scene.height(),
         scene.shapes.len(),
@@ -147,7 +162,7 @@ fn render_image(
     );
     let total = resolved.passes.unwrap_or(u64::MAX);
     let window = settings.checkpoint_every.unwrap_or(1 << 40);
-    let fingerprint = resume::fingerprint(&args.job.scene, &scene, &settings.defines, &resolved.render)?;
+    let fingerprint = resume::fingerprint(scene_path, &scene, &settings.defines, &resolved.render)?;
     let sums_path = resume::path_for(out);
     let prefix = if resume {
         let sum = resume::load(&sums_path, &fingerprint, scene.width(), scene.height())?;

@@ -562,4 +562,50 @@ fn a_sequence_survives_a_sigkill_and_gives_the_frames_of_render_frames() {
         let here = std::fs::read(dir.path().join(format!("local-{f}.exr"))).unwrap();
         assert!(farm == here, "frame {f} differs from coordinator render --frames");
     }
+
+    // Several scene files submitted together: a sequence of one frame each, in one bundle.
+    let text = std::fs::read_to_string(&scene).unwrap();
+    let files: Vec<String> = [0.3, 0.0, -0.3]
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let path = dir.path().join(format!("shot{i}.xml"));
+            let moved = text.replace(
+                r#"name="roll" value="0.42""#,
+                &format!(r#"name="roll" value="{x}""#),
+            );
+            assert!(moved != text, "the scene no longer declares roll=0.42");
+            std::fs::write(&path, moved).unwrap();
+            path.to_string_lossy().into_owned()
+        })
+        .collect();
+    let flags = ["-D", "res=24", "--spp", "16", "--seed", "5"];
+    let render = |command: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let o = Command::new(coordinator_bin())
+            .args(command)
+            .args(&files)
+            .args(flags)
+            .args(["--out", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    render(&["submit", "--to", &url, "--wait"], "files-farm-#.exr");
+    render(&["render"], "files-local-#.exr");
+    let read = |name: String| std::fs::read(dir.path().join(name)).unwrap();
+    for f in 1..=3 {
+        let farm = read(format!("files-farm-{f}.exr"));
+        assert!(
+            farm == read(format!("files-local-{f}.exr")),
+            "file frame {f} differs"
+        );
+        if f > 1 {
+            assert!(
+                farm != read(format!("files-farm-{}.exr", f - 1)),
+                "frames {f} and {} are one",
+                f - 1
+            );
+        }
+    }
 }
