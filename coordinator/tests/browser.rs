@@ -184,6 +184,20 @@ async fn web_page_in_headless_chromium() {
             "res=128",
         ],
     );
+    // A sequence of three frames: its page shows them as a strip of thumbnails.
+    let sequence = submit(
+        &url,
+        &[
+            "--frames",
+            "1-3",
+            "--integrator",
+            "path",
+            "--spp",
+            "8",
+            "-D",
+            "res=32",
+        ],
+    );
     let _w1 = worker_with_env(&url, "render-a", dir.path(), &env);
     let _w2 = worker_with_env(&url, "render-b", dir.path(), &env);
 
@@ -297,6 +311,23 @@ async fn web_page_in_headless_chromium() {
     )
     .await;
     screenshot(&c, "web-workers.png").await;
+
+    // The sequence's page: three frames, each done with its thumbnail, each linking to its job.
+    c.goto(&format!("{url}/#/jobs/{sequence}")).await.unwrap();
+    let strip = wait_js(&c, "the frame strip", Duration::from_secs(60),
+        "const f = [...document.querySelectorAll('#frames .frame')];
+         return f.length === 3 && f.every(a => a.dataset.state === 'done')
+             && f.every(a => { const i = a.querySelector('img'); return i.complete && i.naturalWidth === 32; })
+             ? f.map(a => a.dataset.frame + ':' + a.getAttribute('href')).join(' ') : null").await;
+    let frames = api(&url, &format!("/api/jobs/{sequence}")).await["frames"].clone();
+    let expected: Vec<String> = frames
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| format!("{}:#/jobs/{}", f["frame"], f["job"]))
+        .collect();
+    assert_eq!(strip, json!(expected.join(" ")));
+    screenshot(&c, "web-frames.png").await;
 
     // Cancel from the job's page.
     c.goto(&format!("{url}/#/jobs/{running}")).await.unwrap();

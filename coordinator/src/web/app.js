@@ -112,6 +112,8 @@ const views = {
       } }, 'Cancel job');
       state.error = h('p', { class: 'error', id: 'job-error' });
       state.chart = h('div', { id: 'noise-chart' });
+      state.strip = h('div', { id: 'frames' });
+      state.thumbs = new Map();
       root.replaceChildren(state.title,
         h('div', { class: 'cards' },
           h('div', { class: 'card' }, h('h3', null, 'Latest checkpoint'), state.imageBox),
@@ -143,6 +145,7 @@ const views = {
       state.imageBox.replaceChildren(state.img);
     }
     state.chart.replaceChildren(chart(noise));
+    if (j.frames && j.frames.length) await frameStrip(root, state, j);
   },
 
   /** The workers seen lately. */
@@ -211,6 +214,35 @@ const views = {
       h('div', { class: 'card' }, form, out));
   },
 };
+
+/** A sequence's frames as a strip of thumbnails, each with its state, linking to the frame's
+ *  job; a thumbnail is fetched again only when its frame has a newer checkpoint. */
+async function frameStrip(root, state, j) {
+  if (!state.strip.isConnected) {
+    root.append(h('div', { class: 'card', id: 'frames-card' }, h('h3', null, 'Frames'), state.strip));
+  }
+  const figures = [];
+  for (const f of j.frames) {
+    let t = state.thumbs.get(f.frame);
+    if (!t) {
+      t = { img: h('img', { alt: 'frame ' + f.frame }), passes: 0, caption: h('figcaption') };
+      t.figure = h('a', { href: '#/jobs/' + f.job, class: 'frame', 'data-frame': f.frame },
+        h('figure', null, t.img, t.caption));
+      state.thumbs.set(f.frame, t);
+    }
+    t.figure.dataset.state = f.state;
+    t.caption.replaceChildren('frame ' + f.frame + ' ', stateTag(f.state));
+    if (f.checkpoint_iterations > 0 && f.checkpoint_iterations !== t.passes) {
+      const blob = await (await api('/api/jobs/' + f.job + '/image.png', { raw: true })).blob();
+      const old = t.img.getAttribute('src');
+      t.img.src = URL.createObjectURL(blob);
+      if (old) URL.revokeObjectURL(old);
+      t.passes = f.checkpoint_iterations;
+    }
+    figures.push(t.figure);
+  }
+  state.strip.replaceChildren(...figures);
+}
 
 /** A log-log SVG chart of the noise estimates, with a 1/passes line through the first point. */
 function chart(noise) {
