@@ -466,7 +466,7 @@ impl Farm {
         let (width, height) = first.sum.size();
         let total = frames.iter().map(|f| f.total).sum();
         let render = first.render;
-        self.writes.push(Write::InsertJob(NewJob {
+        let new = NewJob {
             id,
             created_ms: unix_ms(),
             settings: serde_json::to_string(settings).expect("settings serialise"),
@@ -479,26 +479,9 @@ impl Farm {
             height,
             frame_of: None,
             frames: Some(serde_json::to_string(&ids).expect("frames serialise")),
-        }));
-        let row = JobRow {
-            id,
-            created_ms: unix_ms(),
-            settings: String::new(),
-            render: String::new(),
-            scene: scene.to_string(),
-            bundle: bundle.to_string(),
-            total,
-            window: 1,
-            next_start: 0,
-            state: JobState::Queued,
-            message: None,
-            width,
-            height,
-            image_passes: 0,
-            stats: JobStats::default(),
-            frame_of: None,
-            frames: None,
         };
+        let row = JobRow::from(&new);
+        self.writes.push(Write::InsertJob(new));
         let mut entry = entry_of(&row, render, settings.defines.clone(), None);
         entry.frames = ids.clone();
         self.jobs.insert(id, entry);
@@ -521,17 +504,16 @@ impl Farm {
             sum,
             ..
         } = job;
-        let scene = scene.as_str();
         let window = self.window_of(&settings);
         let (width, height) = sum.size();
         let id = self.next_job;
         self.next_job += 1;
-        self.writes.push(Write::InsertJob(NewJob {
+        let new = NewJob {
             id,
             created_ms: unix_ms(),
             settings: serde_json::to_string(&settings).expect("settings serialise"),
             render: serde_json::to_string(&render).expect("settings serialise"),
-            scene: scene.to_string(),
+            scene,
             bundle: bundle.to_string(),
             total,
             window,
@@ -539,31 +521,14 @@ impl Farm {
             height,
             frame_of,
             frames: None,
-        }));
+        };
+        let row = JobRow::from(&new);
+        self.writes.push(Write::InsertJob(new));
         self.scheduler
             .add_job(id, total, window, 0, &[], JobState::Queued);
         self.new_work = true;
         self.scheduler.set_pixels(id, width as u64 * height as u64);
         self.saved.insert(id, (JobState::Queued, 0, None));
-        let row = JobRow {
-            id,
-            created_ms: unix_ms(),
-            settings: String::new(),
-            render: String::new(),
-            scene: scene.to_string(),
-            bundle: bundle.to_string(),
-            total,
-            window,
-            next_start: 0,
-            state: JobState::Queued,
-            message: None,
-            width,
-            height,
-            image_passes: 0,
-            stats: JobStats::default(),
-            frame_of,
-            frames: None,
-        };
         self.jobs.insert(
             id,
             entry_of(

@@ -155,6 +155,31 @@ pub struct NewJob {
     pub frames: Option<String>,
 }
 
+impl From<&NewJob> for JobRow {
+    /// The row a new job has once inserted: queued, nothing rendered.
+    fn from(job: &NewJob) -> JobRow {
+        JobRow {
+            id: job.id,
+            created_ms: job.created_ms,
+            settings: job.settings.clone(),
+            render: job.render.clone(),
+            scene: job.scene.clone(),
+            bundle: job.bundle.clone(),
+            total: job.total,
+            window: job.window,
+            next_start: 0,
+            state: JobState::Queued,
+            message: None,
+            width: job.width,
+            height: job.height,
+            image_passes: 0,
+            stats: JobStats::default(),
+            frame_of: job.frame_of,
+            frames: job.frames.clone(),
+        }
+    }
+}
+
 /// One change to the database. A farm event returns the list of its writes, and
 /// [`Store::apply`] makes them durable together, outside the farm's lock.
 #[derive(Clone, Debug)]

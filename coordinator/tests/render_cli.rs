@@ -463,7 +463,7 @@ fn a_frame_sequence_ramps_parameters_and_each_frame_renders_alone_to_the_same_by
     let dir = tempfile::tempdir().unwrap();
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/turntable.xml");
     let scene = scene.to_str().unwrap();
-    let render = |frames: &str, angle: &str, out: &str, extra: &[&str]| {
+    let render = |frames: &str, angle: &str, roll: &str, out: &str, extra: &[&str]| {
         let out = dir.path().join(out);
         let mut args = vec![
             "render",
@@ -481,12 +481,12 @@ fn a_frame_sequence_ramps_parameters_and_each_frame_renders_alone_to_the_same_by
             "-D",
             angle,
             "-D",
-            "roll=-0.5:0.4",
+            roll,
         ];
         args.extend_from_slice(extra);
         run(&args)
     };
-    let o = render("1-3", "angle=-20:20", "seq-##.exr", &[]);
+    let o = render("1-3", "angle=-20:20", "roll=-0.5:0.4", "seq-##.exr", &[]);
     assert!(o.status.success());
     let frame = |name: &str| std::fs::read(dir.path().join(name)).unwrap();
     let seq: Vec<Vec<u8>> = ["seq-01.exr", "seq-02.exr", "seq-03.exr"].map(frame).to_vec();
@@ -496,27 +496,8 @@ fn a_frame_sequence_ramps_parameters_and_each_frame_renders_alone_to_the_same_by
     );
     // Frame 2 alone: angle and roll at their midpoints (0 and -0.05), the sequence's seed.
     let alone = |angle: &str, roll: &str| {
-        let out = dir.path().join("alone.exr");
-        let o = run(&[
-            "render",
-            scene,
-            "--frames",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-            "--spp",
-            "2",
-            "--seed",
-            "9",
-            "-D",
-            "res=24",
-            "-D",
-            angle,
-            "-D",
-            roll,
-        ]);
-        assert!(o.status.success());
-        std::fs::read(dir.path().join("alone0002.exr")).unwrap()
+        assert!(render("2", angle, roll, "alone.exr", &[]).status.success());
+        frame("alone0002.exr")
     };
     assert!(
         alone("angle=0", "roll=-0.05") == seq[1],
@@ -527,7 +508,13 @@ fn a_frame_sequence_ramps_parameters_and_each_frame_renders_alone_to_the_same_by
         "the angle changes nothing"
     );
     // --resume: every frame is done, so nothing renders again.
-    let o = render("1-3", "angle=-20:20", "seq-##.exr", &["--resume"]);
+    let o = render(
+        "1-3",
+        "angle=-20:20",
+        "roll=-0.5:0.4",
+        "seq-##.exr",
+        &["--resume"],
+    );
     assert!(o.status.success());
     let log = String::from_utf8_lossy(&o.stderr);
     assert_eq!(log.matches("is done").count(), 3, "{log}");
@@ -536,7 +523,7 @@ fn a_frame_sequence_ramps_parameters_and_each_frame_renders_alone_to_the_same_by
         ("3-1", "angle=0", "runs backwards"),
         ("1-3", "angle=0:x", "two numbers"),
     ] {
-        let o = render(frames, angle, "bad-#.exr", &[]);
+        let o = render(frames, angle, "roll=0", "bad-#.exr", &[]);
         assert!(!o.status.success());
         let log = String::from_utf8_lossy(&o.stderr);
         assert!(log.contains(why), "{log}");
