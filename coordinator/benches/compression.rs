@@ -1,7 +1,7 @@
 //! Results on the wire: `cargo bench -p coordinator --bench compression`.
 //!
 //! Makes realistic results (the sums of `n` passes of a real 512² and 1920×1080 render of
-//! cbox-spheres, with their noise: see `coordinator::synthetic`) and prints, on one core, the
+//! cbox-spheres, with their noise: see `coordinator::client::synthetic`) and prints, on one core, the
 //! size of the `PFBATCH2` encoding, and for zstd (levels 1 and 3) and lz4 (lz4_flex, frame
 //! format) the compression ratio and MB/s compressing and decompressing (of uncompressed
 //! bytes), then what else a result costs the coordinator: decoding and adding it.
@@ -9,7 +9,7 @@
 
 use std::time::Instant;
 
-use coordinator::synthetic::Synthetic;
+use coordinator::client::synthetic::Synthetic;
 use photonfarm::protocol::decode_result;
 
 fn median(mut f: impl FnMut() -> f64) -> f64 {
@@ -30,7 +30,7 @@ fn main() {
         let dir = std::env::temp_dir().join(format!("pf-compression-bench-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("scene.xml");
-        std::fs::write(&path, coordinator::loadgen::scene_xml(w, h)).unwrap();
+        std::fs::write(&path, coordinator::client::loadgen::scene_xml(w, h)).unwrap();
         let scene = photonfarm::scene::Scene::load(&path, &[]).unwrap();
         let _ = std::fs::remove_dir_all(&dir);
         let synthetic = Synthetic::render(&scene);

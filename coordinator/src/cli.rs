@@ -434,7 +434,7 @@ pub struct ServeArgs {
     /// Megapixels of results per second this coordinator absorbs: batches lengthen beyond
     /// --batch-seconds so that all workers' results together stay within it (workers × image
     /// pixels / this). 0 turns the rule off. See docs/scaling.md.
-    #[arg(long, default_value_t = crate::scheduler::DEFAULT_ABSORB_PIXELS_PER_S / 1e6)]
+    #[arg(long, default_value_t = crate::service::scheduler::DEFAULT_ABSORB_PIXELS_PER_S / 1e6)]
     pub absorb_mpx_per_second: f64,
 }
 
@@ -545,19 +545,19 @@ fn parse_define(s: &str) -> Result<(String, String), String> {
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Render(args) => crate::render_command::run(&args),
-        Command::Serve(args) => crate::serve_command::run(args),
+        Command::Render(args) => crate::local::render::run(&args),
+        Command::Serve(args) => crate::service::serve_command::run(args),
         Command::Submit(args) => crate::client::run_submit(&args),
-        Command::Converge(args) => crate::converge::run(&args),
+        Command::Converge(args) => crate::local::converge::run(&args),
         Command::Jobs(c) => crate::client::run_job_command(&JobCommand::Jobs(&c)),
         Command::Status(a) => crate::client::run_job_command(&JobCommand::Status(&a)),
         Command::Wait(a) => crate::client::run_job_command(&JobCommand::Wait(&a)),
         Command::Fetch(a) => crate::client::run_job_command(&JobCommand::Fetch(&a)),
         Command::Cancel(a) => crate::client::run_job_command(&JobCommand::Cancel(&a)),
         Command::Relay(args) => crate::relay::run(&args),
-        Command::Loadgen(args) => crate::loadgen::run(&args),
+        Command::Loadgen(args) => crate::client::loadgen::run(&args),
         Command::CheckScene(args) => {
-            crate::scene_check::run_child(&args.scene, &args.root, &args.settings, &args.out)
+            crate::service::scene_check::run_child(&args.scene, &args.root, &args.settings, &args.out)
         }
     }
 }

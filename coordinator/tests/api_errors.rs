@@ -330,7 +330,7 @@ async fn v_id(api: &Api) -> u64 {
 async fn every_protocol_route_is_served_and_guarded_by_its_token() {
     use axum::body::Body;
     use axum::http::{Request, header};
-    use coordinator::{admission::Admission, api::Tokens, farm::FarmConfig, service};
+    use coordinator::service::{self, admission::Admission, api::Tokens, farm::FarmConfig};
     use photonfarm::protocol::routes;
     use tower::ServiceExt;
 
@@ -348,7 +348,7 @@ async fn every_protocol_route_is_served_and_guarded_by_its_token() {
             ..FarmConfig::default()
         },
     };
-    let app = coordinator::api::router(service::open(&config).await.unwrap());
+    let app = service::api::router(service::open(&config).await.unwrap());
     let call = |method: &str, path: String, token: &str| {
         let request = Request::builder()
             .method(method)

@@ -35,8 +35,8 @@ use serde_json::json;
 use sha2::{Digest, Sha256};
 
 use crate::cli::RelayArgs;
-use crate::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use crate::serving::ServingLimits;
+use crate::serving::result_body::{BodyError, lease_key, read_result_body, result_encoding};
 use book::{Book, PartError};
 
 /// Shared by the relay's handlers and loops.

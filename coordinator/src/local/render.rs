@@ -16,11 +16,11 @@ use photonfarm::job::JobSettings;
 use photonfarm::render::{Method, Renderer};
 use photonfarm::scene::Scene;
 
-use crate::accumulator::Accumulator;
 use crate::cli::RenderArgs;
+use crate::local::resume;
 use crate::progress::Reporter;
-use crate::resume;
-use crate::scheduler::{JobState, Scheduler, SchedulerConfig};
+use crate::service::accumulator::Accumulator;
+use crate::service::scheduler::{JobState, Scheduler, SchedulerConfig};
 
 /// Renders `args.job.scene` to `args.out`, or each frame of `--frames` to its name.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {

@@ -7,6 +7,9 @@
 //! A relay built without these limits was aborted by one 2.5 GB release body and locked out by
 //! 300 idle sockets.
 
+pub mod connections;
+pub mod result_body;
+
 use std::time::Duration;
 
 use axum::Router;
@@ -16,7 +19,7 @@ use axum::response::Response;
 use tokio::net::TcpListener;
 use tower_http::timeout::RequestBodyTimeoutLayer;
 
-use crate::connections::{BoundedListener, Busy, ConnectionLimits};
+use crate::serving::connections::{BoundedListener, Busy, ConnectionLimits};
 
 /// Bodies of JSON endpoints (and the `settings` form field) are small; 64 KiB is plenty.
 pub const JSON_LIMIT: usize = 64 * 1024;
@@ -127,7 +130,7 @@ pub async fn serve(
 }
 
 /// Marks the connection busy while a request is handled, so the idle timeout does not close
-/// it under a long handler (see [`crate::connections`]).
+/// it under a long handler (see [`crate::serving::connections`]).
 async fn busy(req: Request, next: Next) -> Response {
     let guard = req
         .extensions()

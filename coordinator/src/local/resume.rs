@@ -22,7 +22,7 @@ use photonfarm::render::RenderSettings;
 use photonfarm::scene::Scene;
 use sha2::Digest;
 
-use crate::store::write_durably;
+use crate::service::store::write_durably;
 
 /// First line of a resume file, before the fingerprint and the sums' checksum.
 const HEADER: &str = "photonfarm-resume 2 ";

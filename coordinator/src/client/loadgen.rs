@@ -3,7 +3,7 @@
 //!
 //! Each simulated worker runs the real worker's protocol: it leases a batch, waits the batch's
 //! simulated render time (heartbeating as a worker does), and uploads a valid result of the
-//! lease's size and pass count (realistic content from [`crate::synthetic`], compressed as
+//! lease's size and pass count (realistic content from [`crate::client::synthetic`], compressed as
 //! the real worker does when the coordinator accepts it). It renders nothing, so one core
 //! simulates thousands of workers. A simulated client may also stand for a relay of `fanout`
 //! workers (`--fanout`): it asks for one pass per worker at first and renders `fanout` times
@@ -26,10 +26,10 @@ use tokio::sync::OnceCell;
 
 use crate::cli::LoadgenArgs;
 use crate::client::ApiClient;
-use crate::synthetic::Synthetic;
+use crate::client::synthetic::Synthetic;
 
 /// The scene of the simulated job: the Cornell box with spheres, at the asked size.
-const SCENE: &str = include_str!("../../scenes/cbox-spheres.xml");
+const SCENE: &str = include_str!("../../../scenes/cbox-spheres.xml");
 
 /// What the simulated workers measured in the window.
 #[derive(Default, Debug)]

@@ -267,7 +267,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> anyhow::Result<()> {
     std::fs::write(path, out).with_context(|| format!("cannot write {}", path.display()))
 }
 
-const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// A font that ships with the program: the chart looks the same on every machine.
 fn register_font() {

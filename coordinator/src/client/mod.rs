@@ -1,6 +1,9 @@
 //! The API's client: `coordinator submit`, and the job commands (`jobs`, `status`, `wait`,
 //! `fetch`, `cancel`) that follow a job after it was submitted.
 
+pub mod loadgen;
+pub mod synthetic;
+
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
@@ -10,8 +13,8 @@ use reqwest::multipart::{Form, Part};
 use serde_json::Value;
 
 use crate::cli::SubmitArgs;
+use crate::local::render::check_output;
 use crate::progress::Reporter;
-use crate::render_command::check_output;
 
 /// An authenticated client of one coordinator.
 pub struct ApiClient {

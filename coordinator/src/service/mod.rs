@@ -3,6 +3,18 @@
 //! [`run`] takes a bound listener and a shutdown future, so tests start a real server on port 0
 //! and stop it at will; `main` only parses flags and waits for ctrl-c or SIGTERM.
 
+pub mod accumulator;
+pub mod admission;
+pub mod api;
+pub mod farm;
+pub mod metrics;
+pub mod scene_check;
+pub mod scheduler;
+pub mod serve_command;
+pub mod store;
+pub mod web;
+pub mod workers;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
@@ -11,10 +23,10 @@ use std::time::Duration;
 use tokio::net::TcpListener;
 use tokio::sync::Semaphore;
 
-use crate::admission::Admission;
-use crate::api::{AppState, Tokens, router};
-use crate::farm::{FarmConfig, SharedFarm};
-use crate::store::Store;
+use crate::service::admission::Admission;
+use crate::service::api::{AppState, Tokens, router};
+use crate::service::farm::{FarmConfig, SharedFarm};
+use crate::service::store::Store;
 
 /// Service settings.
 #[derive(Clone, Debug)]

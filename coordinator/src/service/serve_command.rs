@@ -2,11 +2,11 @@
 
 use anyhow::{Context, bail};
 
-use crate::admission::Admission;
-use crate::api::Tokens;
 use crate::cli::ServeArgs;
-use crate::farm::FarmConfig;
-use crate::scheduler::SchedulerConfig;
+use crate::service::admission::Admission;
+use crate::service::api::Tokens;
+use crate::service::farm::FarmConfig;
+use crate::service::scheduler::SchedulerConfig;
 use crate::service::{ServeConfig, run as serve};
 
 /// The limits: this machine's defaults, overridden by the flags.

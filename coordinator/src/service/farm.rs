@@ -1,5 +1,5 @@
 //! The farm's state and rules: jobs, their schedulers and sums, kept durable in the store.
-//! The HTTP layer ([`crate::api`]) only translates requests into these calls.
+//! The HTTP layer ([`crate::service::api`]) only translates requests into these calls.
 //!
 //! The farm sits behind one mutex, so every method here is bookkeeping only: no fsync, no
 //! image encoding, no per-pixel work and no allocation proportional to a job's size. Those
@@ -24,10 +24,12 @@ use photonfarm::protocol::{HeartbeatReply, Lease, LeaseRequest};
 use photonfarm::render::{Method, RenderSettings};
 use serde::Serialize;
 
-use crate::accumulator::Accumulator;
-use crate::scheduler::{Grant, JobState, LeaseError, Scheduler, SchedulerConfig};
-use crate::store::{JobRow, JobStats, Layout, LeaseRow, NewJob, Store, StoreError, StoredBatch, Write};
-use crate::workers::{Holding, Roster, WorkerStatus};
+use crate::service::accumulator::Accumulator;
+use crate::service::scheduler::{Grant, JobState, LeaseError, Scheduler, SchedulerConfig};
+use crate::service::store::{
+    JobRow, JobStats, Layout, LeaseRow, NewJob, Store, StoreError, StoredBatch, Write,
+};
+use crate::service::workers::{Holding, Roster, WorkerStatus};
 
 /// Farm settings.
 #[derive(Clone, Copy, Debug)]

@@ -12,7 +12,7 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::Registry;
 
-use crate::farm::JobStatus;
+use crate::service::farm::JobStatus;
 
 /// What the service observes between scrapes.
 #[derive(Clone)]

@@ -29,7 +29,7 @@ use photonfarm::parity::OddSums;
 use photonfarm::protocol::{BatchResult, decode_result, encode_batch, encode_result, max_encoded_batch};
 use rusqlite::{Connection, OptionalExtension, params};
 
-use crate::scheduler::JobState;
+use crate::service::scheduler::JobState;
 
 /// Storage failures: reported as 500s and logged, never a panic.
 #[derive(Debug, thiserror::Error)]

@@ -29,13 +29,13 @@ use sha2::{Digest, Sha256};
 use tokio::io::AsyncWriteExt;
 use tokio::sync::Semaphore;
 
-use crate::accumulator::Accumulator;
-use crate::admission::Admission;
-use crate::farm::{Committed, Farm, FarmError, FrameJob, SharedFarm};
-use crate::result_body::{BodyError, lease_key, receive_result_to, result_encoding};
-use crate::scene_check::{CheckError, check_in_child};
+use crate::service::accumulator::Accumulator;
+use crate::service::admission::Admission;
+use crate::service::farm::{Committed, Farm, FarmError, FrameJob, SharedFarm};
+use crate::service::scene_check::{CheckError, check_in_child};
+use crate::service::store::{Layout, StoredBatch};
 use crate::serving::JSON_LIMIT;
-use crate::store::{Layout, StoredBatch};
+use crate::serving::result_body::{BodyError, lease_key, receive_result_to, result_encoding};
 
 /// Who may call what: users submit and read jobs, workers lease and render. Separate tokens
 /// keep a worker's credentials (often spread over many machines) from cancelling or reading
@@ -59,7 +59,7 @@ pub struct AppState {
     pub tokens: Tokens,
     /// The limits every request is held to.
     pub admission: Admission,
-    /// Checks submitted scenes in a child process, if set (see [`crate::scene_check`]).
+    /// Checks submitted scenes in a child process, if set (see [`crate::service::scene_check`]).
     pub checker: Option<PathBuf>,
     /// Names scratch folders for incoming bundles.
     pub uploads: AtomicU64,
@@ -72,7 +72,7 @@ pub struct AppState {
     /// Scene checks at once (loading a scene can take many times its files' size).
     pub scene_checks: Semaphore,
     /// What `/metrics` reports beyond the farm's state.
-    pub metrics: crate::metrics::Metrics,
+    pub metrics: crate::service::metrics::Metrics,
     /// Set when the service starts to stop.
     pub stopping: tokio::sync::watch::Sender<bool>,
 }
@@ -116,7 +116,7 @@ impl IntoResponse for ApiError {
 
 impl From<FarmError> for ApiError {
     fn from(e: FarmError) -> ApiError {
-        use crate::scheduler::LeaseError;
+        use crate::service::scheduler::LeaseError;
         let status = match &e {
             FarmError::NoJob(_) | FarmError::NoImage(_) => StatusCode::NOT_FOUND,
             FarmError::Lease(LeaseError::NotActive(_)) => StatusCode::CONFLICT,
@@ -142,7 +142,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route(routes::JOB_NOISE, get(noise))
         .route(routes::JOB_FILE, get(image))
         .route(routes::WORKERS, get(workers))
-        .merge(crate::web::routes())
+        .merge(crate::service::web::routes())
         .route(routes::BUNDLE, get(bundle))
         .route(
             routes::LEASE,
@@ -166,7 +166,7 @@ pub fn router(state: Arc<AppState>) -> Router {
 /// the page asks the API for everything, with the token its user types in).
 async fn auth(State(state): State<Arc<AppState>>, headers: HeaderMap, req: Request, next: Next) -> Response {
     let path = req.uri().path();
-    if crate::web::is_asset(path) {
+    if crate::service::web::is_asset(path) {
         return next.run(req).await;
     }
     let wanted: Vec<&String> = if path == routes::HEALTH {
@@ -388,7 +388,8 @@ fn accept_bundle(
                 scratch,
                 std::time::Duration::from_secs(limits.scene_check_timeout_s),
             ),
-            None => crate::scene_check::check(&scene_path, &files_dir, settings).map_err(CheckError::Refused),
+            None => crate::service::scene_check::check(&scene_path, &files_dir, settings)
+                .map_err(CheckError::Refused),
         }
         .map_err(|e| match e {
             CheckError::Internal(m) => ApiError::internal(m),
@@ -490,7 +491,7 @@ fn accept_bundle(
     });
     let (dir, stored) = (state.layout.bundle_dir(hash), state.layout.bundle_archive(hash));
     if !stored.exists() {
-        crate::store::rename_durably(archive, &stored).map_err(storage_error)?;
+        crate::service::store::rename_durably(archive, &stored).map_err(storage_error)?;
     }
     if !dir.exists() {
         let _ = std::fs::rename(&files_dir, &dir);
@@ -530,10 +531,10 @@ fn accept_bundle(
     Ok((StatusCode::CREATED, Json(body)).into_response())
 }
 
-/// The farm in Prometheus' text format (see [`crate::metrics`]); the users' token, as for jobs.
+/// The farm in Prometheus' text format (see [`crate::service::metrics`]); the users' token, as for jobs.
 async fn metrics(State(state): State<Arc<AppState>>) -> ApiResult<Response> {
     let snapshot = with_farm(&state, |f| {
-        Ok(crate::metrics::Snapshot {
+        Ok(crate::service::metrics::Snapshot {
             jobs: f.list(),
             workers: f.workers_present(),
             leases: f.live_leases(),
@@ -556,7 +557,7 @@ async fn noise(State(state): State<Arc<AppState>>, Path(id): Path<String>) -> Ap
     let (points, sum) = with_farm(&state, |f| f.noise(id))?;
     // Read from the job's sum, under its own lock, never while holding the farm's.
     let tracking = sum.is_none_or(|s| s.lock().unwrap_or_else(|p| p.into_inner()).odd().is_some());
-    Ok(Json(crate::farm::NoiseReport { id, tracking, points }).into_response())
+    Ok(Json(crate::service::farm::NoiseReport { id, tracking, points }).into_response())
 }
 
 /// `GET /api/workers`: the workers seen lately, for users (the users' token).
@@ -800,10 +801,10 @@ impl From<std::io::Error> for StorageFailure {
     }
 }
 
-impl From<crate::store::StoreError> for StorageFailure {
-    fn from(e: crate::store::StoreError) -> StorageFailure {
+impl From<crate::service::store::StoreError> for StorageFailure {
+    fn from(e: crate::service::store::StoreError) -> StorageFailure {
         let kind = match &e {
-            crate::store::StoreError::Io(_, io) => Some(io.kind()),
+            crate::service::store::StoreError::Io(_, io) => Some(io.kind()),
             _ => None,
         };
         StorageFailure(kind, e.to_string())
@@ -816,7 +817,7 @@ fn store_result(
     state: &AppState,
     id: u64,
     key: &str,
-    expected: crate::farm::Expected,
+    expected: crate::service::farm::Expected,
     batch: StoredBatch,
     encoding: Encoding,
     len: u64,
@@ -905,7 +906,7 @@ fn store_result(
 fn merge(
     state: &AppState,
     job: u64,
-    job_sum: &crate::farm::JobSum,
+    job_sum: &crate::service::farm::JobSum,
     total: u64,
     start: u64,
     sum: photonfarm::film::FilmSum,
