@@ -56,6 +56,14 @@ pub enum FilmError {
         /// The cause.
         source: image::ImageError,
     },
+    /// Writing an EXR with layers failed.
+    #[error("cannot write {path}: {source}")]
+    WriteLayers {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: exr::error::Error,
+    },
 }
 
 /// Converts one sample to fixed point; None for NaN or infinity.

@@ -10,6 +10,7 @@ pub mod camera;
 pub mod color;
 pub mod compression;
 pub mod engine;
+pub mod features;
 pub mod film;
 pub mod filter;
 pub mod frames;

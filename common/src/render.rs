@@ -13,6 +13,7 @@ use glam::{Vec2, Vec3A};
 use crate::color::Rgb;
 use crate::engine::Backend;
 use crate::engine::diffuse_path::{self, DiffuseScene};
+use crate::features::{self, Features};
 use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
 use crate::integrator::direct_illumination::{self, DirectSettings};
@@ -91,6 +92,8 @@ pub struct Renderer<'s> {
     sppm: SppmBuffers,
     /// An odd pass's own sum, for [`Batch::odd`].
     part: FilmSum,
+    /// Whether passes also sum the denoiser's features ([`Renderer::with_features`]).
+    features: bool,
 }
 
 /// Passes rendered by [`Renderer::render`].
@@ -101,6 +104,8 @@ pub struct Batch {
     /// Their odd passes' sums on the sampled pixels, for the farm's noise estimate
     /// ([`crate::parity`]).
     pub odd: OddSums,
+    /// Their features, if the renderer sums them ([`Renderer::with_features`]).
+    pub features: Option<Features>,
 }
 
 /// What SPPM's iterations reuse: memory depends on the photon count, not on the iterations.
@@ -134,12 +139,20 @@ impl<'s> Renderer<'s> {
             lanes,
             sppm: SppmBuffers::default(),
             part: FilmSum::new(scene.width(), scene.height()),
+            features: false,
         }
+    }
+
+    /// The same renderer, whose batches also sum the denoiser's features, pass by pass
+    /// ([`crate::features`]): a render pays for them only when it asks.
+    pub fn with_features(mut self) -> Renderer<'s> {
+        self.features = true;
+        self
     }
 
     /// The sum of passes `passes`.
     pub fn passes(&mut self, passes: Range<u64>) -> FilmSum {
-        self.run(passes, None, &AtomicBool::new(false), None)
+        self.run(passes, None, &AtomicBool::new(false), None, None)
     }
 
     /// Renders passes `passes`, in order, until `stop` is set (checked before each pass). For
@@ -150,8 +163,9 @@ impl<'s> Renderer<'s> {
     pub fn render(&mut self, passes: Range<u64>, radii: Option<&[[f32; 2]]>, stop: &AtomicBool) -> Batch {
         let (w, h) = (self.scene.width(), self.scene.height());
         let mut odd = OddSums::empty(w, h);
-        let sum = self.run(passes, radii, stop, Some(&mut odd));
-        Batch { sum, odd }
+        let mut features = self.features.then(|| Features::new(w, h));
+        let sum = self.run(passes, radii, stop, Some(&mut odd), features.as_mut());
+        Batch { sum, odd, features }
     }
 
     fn run(
@@ -160,6 +174,7 @@ impl<'s> Renderer<'s> {
         radii: Option<&[[f32; 2]]>,
         stop: &AtomicBool,
         mut odd: Option<&mut OddSums>,
+        mut features: Option<&mut Features>,
     ) -> FilmSum {
         let schedule;
         let radii = match (&self.settings.method, radii) {
@@ -183,6 +198,9 @@ impl<'s> Renderer<'s> {
                 break;
             }
             let radii = radii.get(k).copied().unwrap_or([0.0; 2]);
+            if let Some(f) = features.as_deref_mut() {
+                add_feature_pass(self.scene, self.settings.seed, pass, f);
+            }
             match odd.as_deref_mut() {
                 Some(odd) if pass % 2 == 1 => {
                     let mut part = std::mem::replace(&mut self.part, FilmSum::new(0, 0));
@@ -283,16 +301,40 @@ fn add_pixel_samples(
     pass: u64,
     radiance: impl Fn(Ray, &mut Sampler) -> Rgb + Sync,
 ) {
-    let sample = |x: u32, y: u32| -> (Rgb, Vec2) {
+    add_samples(scene, film, |x, y| {
         let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
         (radiance(ray, &mut sampler), u_pixel)
-    };
+    });
+}
+
+/// Adds one sample per pixel, `sample(x, y)` giving its value and its offset within the pixel,
+/// through the scene's filter; counts one pass.
+fn add_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32) -> (Rgb, Vec2) + Sync) {
     if scene.filter.is_box() {
         add_box_samples(scene, film, sample);
     } else {
         splat::add_filtered_samples(scene, film, sample);
     }
     film.passes += 1;
+}
+
+/// Adds pass `pass`'s features: one walk per pixel from the pass's camera sample, then the
+/// albedo and the normal through the filter at the sample's film position, as the image's.
+fn add_feature_pass(scene: &Scene, seed: u64, pass: u64, out: &mut Features) {
+    let w = scene.width();
+    let pixels = w as usize * scene.height() as usize;
+    let samples: Vec<(features::Sample, Vec2)> = (0..pixels)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
+            let (ray, u_pixel, mut sampler) = camera_sample(scene, seed, pass, x, y);
+            (features::sample(scene, ray, &mut sampler), u_pixel)
+        })
+        .collect();
+    let at = |x: u32, y: u32| &samples[y as usize * w as usize + x as usize];
+    add_samples(scene, &mut out.albedo, |x, y| (at(x, y).0.albedo, at(x, y).1));
+    add_samples(scene, &mut out.normal, |x, y| (at(x, y).0.normal, at(x, y).1));
+    add_samples(scene, &mut out.emitted, |x, y| (at(x, y).0.emitted, at(x, y).1));
 }
 
 /// The camera ray of pixel (x, y) in pass `pass`, its offset within the pixel, and the sampler
@@ -481,6 +523,61 @@ mod tests {
             let stopped = renderer.render(0..4, None, &AtomicBool::new(true));
             assert_eq!((stopped.sum.passes, stopped.odd.passes), (0, 0));
             assert!(stopped.sum.sums.iter().all(|s| *s == [0; 3]));
+        }
+    }
+
+    /// Features are exact sums like the image: any split of the passes gives the same bytes,
+    /// they change nothing in the image, and on a Lambertian surface seen head-on the albedo is
+    /// its reflectance exactly and the normal faces the camera.
+    #[test]
+    fn features_sum_exactly_and_read_the_first_surface() {
+        let scene = Scene::from_str(SCENE, Path::new("inline.xml"), &[]).unwrap();
+        let path = PathSettings::from_scene(&scene);
+        let never = AtomicBool::new(false);
+        for method in [Method::Path(path), Method::Ptracer(path)] {
+            let settings = RenderSettings { seed: 5, method };
+            let whole = Renderer::new(&scene, &settings)
+                .with_features()
+                .render(0..6, None, &never);
+            let mut parts = Renderer::new(&scene, &settings)
+                .with_features()
+                .render(2..6, None, &never);
+            let first = Renderer::new(&scene, &settings)
+                .with_features()
+                .render(0..2, None, &never);
+            parts
+                .features
+                .as_mut()
+                .unwrap()
+                .add(first.features.as_ref().unwrap())
+                .unwrap();
+            assert_eq!(whole.features, parts.features);
+            assert_eq!(whole.sum, Renderer::new(&scene, &settings).passes(0..6));
+            assert!(
+                Renderer::new(&scene, &settings)
+                    .render(0..1, None, &never)
+                    .features
+                    .is_none()
+            );
+            let f = whole.features.unwrap();
+            let centre = 4 * 12 + 6;
+            assert_eq!(f.albedo_image().unwrap()[centre], Rgb::splat(0.5));
+            let n = f.normal_image().unwrap()[centre];
+            // Pixel (6, 4) lies right of and below the centre: the sphere's normal there
+            // leans right (+x) and down (-y), by about 8°.
+            assert!(n.z > 0.97 && n.x > 0.1 && n.y < -0.08, "{n}");
+            // A mean of unit normals over the pixel: a little shorter than one.
+            assert!((0.98..=1.0).contains(&n.length()), "{n}");
+            // The emitter behind the sphere is seen directly only past its outline (the
+            // sphere covers columns 3 to 8): there the emission seen directly is the image,
+            // and the path tracer's image holds it everywhere.
+            let (emitted, image) = (f.emitted.image().unwrap(), whole.sum.image().unwrap());
+            let beside = 4 * 12 + 9;
+            assert!(emitted[beside].x > 0.5 && emitted[centre] == Rgb::ZERO);
+            if let Method::Path(_) = method {
+                assert_eq!(emitted[beside], image[beside]);
+                assert!(emitted.iter().zip(&image).all(|(e, i)| e.cmple(*i + 1e-6).all()));
+            }
         }
     }
 
