@@ -184,6 +184,10 @@ pub struct ConvergeArgs {
     /// Render threads (default: one per core).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Also measure each line's denoised preview (a line NAME+denoised; Open Image Denoise,
+    /// as `render --denoise`).
+    #[arg(long)]
+    pub denoise: bool,
     /// Override a scene parameter; repeatable.
     #[arg(short = 'D', value_name = "NAME=VALUE", value_parser = parse_define)]
     pub define: Vec<(String, String)>,
@@ -340,6 +344,16 @@ pub struct RenderArgs {
     /// How often the exact sums are saved to `OUT.resume` while rendering [default: 30].
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub save_every: Option<f64>,
+    /// Also write a denoised preview, `OUT` with `.denoised` before its extension (`x.exr` →
+    /// `x.denoised.exr`), made by Open Image Denoise from the image, its albedo and its normal
+    /// (implies --aovs). The image itself is unchanged. Needs a build with OIDN (README).
+    #[arg(long)]
+    pub denoise: bool,
+    /// Also sum the denoiser's features, the albedo and normal of the first surface seen past
+    /// mirrors and glass, and write them into the EXR as channels `albedo.R` … `normal.B`. Costs
+    /// about one ray per pixel and pass; needs an .exr output.
+    #[arg(long)]
+    pub aovs: bool,
     /// Size limits (as for `coordinator serve`).
     #[command(flatten)]
     pub limits: LimitArgs,

@@ -3,13 +3,20 @@
 //! Each line (a method, or one value of a swept SPPM setting) renders for the same time
 //! budget; at geometrically spaced moments (every √2 of render time, from 0.25 s) the image so
 //! far is compared with the reference. Comparison time is not counted as render time.
+//!
+//! With `--denoise`, every line also sums the denoiser's features, and each measurement is
+//! taken twice: of the image, and of its denoised preview (a line `NAME+denoised`), whose time
+//! includes the denoising. Both count the features' cost, so the two curves of a method differ
+//! only by the denoiser.
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use clap::ValueEnum;
 use photonfarm::color::Rgb;
+use photonfarm::features::Features;
 use photonfarm::film::{FilmSum, read_image};
 use photonfarm::integrator::sppm::VolumeEstimate;
 use photonfarm::job::{Integrator as JobIntegrator, JobSettings};
@@ -57,6 +64,9 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     if !(args.time_limit > 0.0 && args.time_limit.is_finite()) {
         bail!("--time-limit must be a positive number of seconds");
     }
+    if args.denoise && !crate::denoise::AVAILABLE {
+        bail!("--denoise: {}", crate::denoise::UNAVAILABLE);
+    }
     let lines = plan_lines(args)?;
     let (rw, rh, reference) =
         read_image(&args.reference).with_context(|| format!("cannot read {}", args.reference.display()))?;
@@ -84,9 +94,10 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
             &reference,
             name,
             Duration::from_secs_f64(args.time_limit),
+            args.denoise,
             &pool,
-        );
-        if let Some(last) = line_rows.last() {
+        )?;
+        if let Some(last) = line_rows.iter().rev().find(|r| r.line == *name) {
             eprintln!(
                 "{name}: {} passes in {:.1} s, RMSE {:.4}, worst channel mean error {:.2}%",
                 last.passes,
@@ -219,21 +230,31 @@ fn measure(
     reference: &[Rgb],
     name: &str,
     budget: Duration,
+    denoise: bool,
     pool: &rayon::ThreadPool,
-) -> Vec<Row> {
+) -> anyhow::Result<Vec<Row>> {
     let mut film = FilmSum::new(scene.width(), scene.height());
+    let mut features = denoise.then(|| Features::new(scene.width(), scene.height()));
     let mut render_time = Duration::ZERO;
     let mut next = Duration::from_millis(250).min(budget);
     let mut chunk = 1u64;
     let mut rows = Vec::new();
     let mut renderer = Renderer::new(scene, settings);
+    if denoise {
+        renderer = renderer.with_features();
+    }
+    let never = AtomicBool::new(false);
     loop {
         let start = Instant::now();
-        let part = pool.install(|| renderer.passes(film.passes..film.passes + chunk));
+        let batch = pool.install(|| renderer.render(film.passes..film.passes + chunk, None, &never));
         render_time += start.elapsed();
-        film.add(&part).expect("same scene, same size");
+        film.add(&batch.sum).expect("same scene, same size");
+        if let (Some(all), Some(these)) = (features.as_mut(), &batch.features) {
+            all.add(these).expect("same scene, same size");
+        }
         if render_time >= next || render_time >= budget {
-            let (rmse, worst) = errors(&film.image().expect("passes were rendered"), reference);
+            let image = film.image().expect("passes were rendered");
+            let (rmse, worst) = errors(&image, reference);
             rows.push(Row {
                 line: name.to_string(),
                 seconds: render_time.as_secs_f64(),
@@ -241,13 +262,25 @@ fn measure(
                 rmse,
                 worst_mean_error: worst,
             });
+            if let Some(f) = &features {
+                let start = Instant::now();
+                let denoised = crate::denoise::denoise(&image, f)?;
+                let (rmse, worst) = errors(&denoised, reference);
+                rows.push(Row {
+                    line: format!("{name}+denoised"),
+                    seconds: (render_time + start.elapsed()).as_secs_f64(),
+                    passes: film.passes,
+                    rmse,
+                    worst_mean_error: worst,
+                });
+            }
             while next <= render_time {
                 next = next.mul_f64(std::f64::consts::SQRT_2);
             }
             next = next.min(budget);
         }
         if render_time >= budget {
-            return rows;
+            return Ok(rows);
         }
         // Aim the next chunk at the next measurement.
         let per_pass = render_time.as_secs_f64() / film.passes as f64;

@@ -10,7 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use photonfarm::film::FilmSum;
+use photonfarm::features::{Features, write_exr_with_features};
+use photonfarm::film::{FilmSum, write_image};
 use photonfarm::frames::{frame_path, parse_frames};
 use photonfarm::job::JobSettings;
 use photonfarm::render::{Method, Renderer};
@@ -26,6 +27,16 @@ use crate::service::scheduler::{JobState, Scheduler, SchedulerConfig};
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     // Check everything cheap first: a typo must not cost a long render.
     check_output(&args.out)?;
+    if args.denoise && !crate::denoise::AVAILABLE {
+        bail!("--denoise: {}", crate::denoise::UNAVAILABLE);
+    }
+    if args.aovs && !is_exr(&args.out) {
+        bail!(
+            "--aovs: {} is not an EXR, and only EXR files hold the albedo and normal channels \
+             (--denoise alone works with PNG)",
+            args.out.display()
+        );
+    }
     if let Some(t) = args.time_limit
         && !(t > 0.0 && t.is_finite())
     {
@@ -107,6 +118,13 @@ fn render_image(
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
+    if args.denoise && !scene.filter.is_box() {
+        eprintln!(
+            "warning: --denoise: the film's filter is not a box, so each sample is spread over \
+             its neighbours, which Open Image Denoise cannot tell from detail: expect little \
+             denoising (<rfilter type=\"box\"/> gives it independent pixels; docs/denoising.md)"
+        );
+    }
     let resolved = settings.resolve(&scene, args.time_limit.is_some())?;
     // Before anything the size of the film or the photon count is allocated.
     args.limits
@@ -183,6 +201,20 @@ fn render_image(
         FilmSum::new(scene.width(), scene.height())
     };
     let done = prefix.passes;
+    // The denoiser's features, summed beside the image and saved beside its sums.
+    let with_features = args.denoise || args.aovs;
+    let mut features = match (with_features, resume) {
+        (false, _) => None,
+        (true, false) => Some(Features::new(scene.width(), scene.height())),
+        (true, true) => Some(resume::load_features(
+            &sums_path,
+            &fingerprint,
+            scene.width(),
+            scene.height(),
+            done,
+        )?),
+    };
+    let save_features = |f: &Features| resume::save_features(&sums_path, &fingerprint, f);
     if done > total {
         bail!(
             "--resume: {} already holds {done} {unit}, more than the {total} asked for (ask for at \
@@ -202,6 +234,9 @@ fn render_image(
     let mut checkpoint_error = None;
     let now = || start.elapsed().as_millis() as u64;
     let mut renderer = Renderer::new(&scene, &resolved.render);
+    if with_features {
+        renderer = renderer.with_features();
+    }
     loop {
         let stop = interrupted.load(Ordering::Relaxed);
         if stop || limit.is_some_and(|l| start.elapsed() >= l) {
@@ -211,7 +246,11 @@ fn render_image(
             break;
         };
         // SPPM's radii from the settings' schedule, as the coordinator sends them to workers.
-        let sum = pool.install(|| renderer.render(grant.start..grant.end, None, interrupted).sum);
+        let batch = pool.install(|| renderer.render(grant.start..grant.end, None, interrupted));
+        let sum = batch.sum;
+        if let (Some(all), Some(these)) = (features.as_mut(), &batch.features) {
+            all.add(these)?;
+        }
         if sum.passes == 0 {
             // Interrupted before the batch's first pass; the loop closes the job.
             continue;
@@ -222,7 +261,9 @@ fn render_image(
         let checkpoints = acc.add(grant.start, sum, None)?.checkpoints;
         if (saved.elapsed() >= save_every || !checkpoints.is_empty()) && save_error.is_none() {
             // Keep rendering if this fails: the image may still be written.
-            if let Err(e) = resume::save(&sums_path, &fingerprint, acc.prefix()) {
+            let saved_all = resume::save(&sums_path, &fingerprint, acc.prefix())
+                .and_then(|()| features.as_ref().map_or(Ok(()), save_features));
+            if let Err(e) = saved_all {
                 save_error = Some(format!("{e:#}"));
             }
             saved = Instant::now();
@@ -258,14 +299,37 @@ fn render_image(
     if let Some(e) = save_error {
         eprintln!("warning: the sums for --resume were not saved: {e}");
     }
-    film.write(out)?;
+    let image = film.image()?;
+    match &features {
+        Some(f) if is_exr(out) => write_exr_with_features(&image, f, out)?,
+        _ => write_image(&image, film.width, film.height, out)?,
+    }
     // A render that reached its pass count needs no sums; one that stopped early keeps them for
     // --resume.
     let finished = film.passes >= total;
     if finished {
         let _ = std::fs::remove_file(&sums_path);
+        resume::remove_features(&sums_path);
     } else {
         resume::save(&sums_path, &fingerprint, film)?;
+        if let Some(f) = &features {
+            save_features(f)?;
+        }
+    }
+    if args.denoise
+        && let Some(f) = &features
+    {
+        // After the image and its sums are safe: a failing denoiser loses no work.
+        let t = Instant::now();
+        let denoised = crate::denoise::denoise(&image, f)
+            .with_context(|| format!("{} was written, but denoising it failed", out.display()))?;
+        let path = crate::denoise::denoised_path(out);
+        write_image(&denoised, film.width, film.height, &path)?;
+        eprintln!(
+            "wrote {} (denoised in {:.2} s)",
+            path.display(),
+            t.elapsed().as_secs_f64()
+        );
     }
     if settings
         .checkpoint_every
@@ -321,6 +385,11 @@ pub fn checkpoint_path(out: &Path, count: u64) -> PathBuf {
     let stem = out.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
     let ext = out.extension().map(|s| s.to_string_lossy()).unwrap_or_default();
     out.with_file_name(format!("{stem}-{count:06}.{ext}"))
+}
+
+/// Whether `out` names an EXR file.
+fn is_exr(out: &Path) -> bool {
+    out.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))
 }
 
 /// Fails early on an output the render could not write.

@@ -16,6 +16,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use photonfarm::features::Features;
 use photonfarm::film::FilmSum;
 use photonfarm::protocol::{decode_batch, encode_batch};
 use photonfarm::render::RenderSettings;
@@ -70,6 +71,53 @@ pub fn save(path: &Path, fingerprint: &str, sum: &FilmSum) -> anyhow::Result<()>
     let mut bytes = format!("{HEADER}{fingerprint} {checksum}\n").into_bytes();
     bytes.extend(sums);
     write_durably(path, &bytes).with_context(|| format!("cannot save {}", path.display()))
+}
+
+/// The file of feature `name` beside sums file `sums`: `out.exr.resume.albedo`.
+fn features_path(sums: &Path, name: &str) -> PathBuf {
+    let mut p = sums.as_os_str().to_os_string();
+    p.push(format!(".{name}"));
+    PathBuf::from(p)
+}
+
+/// Saves a render's features beside its sums file `sums`, one file per sum.
+pub fn save_features(sums: &Path, fingerprint: &str, features: &Features) -> anyhow::Result<()> {
+    for (name, sum) in Features::NAMES.iter().zip(features.sums()) {
+        save(&features_path(sums, name), fingerprint, sum)?;
+    }
+    Ok(())
+}
+
+/// Loads the features saved beside sums file `sums`, which must cover the `passes` the sums do.
+pub fn load_features(
+    sums: &Path,
+    fingerprint: &str,
+    width: u32,
+    height: u32,
+    passes: u64,
+) -> anyhow::Result<Features> {
+    let mut loaded = Vec::new();
+    for name in Features::NAMES {
+        let path = features_path(sums, name);
+        let sum = load(&path, fingerprint, width, height)
+            .context("the render being resumed was not summing features (--aovs, --denoise)")?;
+        if sum.passes != passes {
+            bail!(
+                "--resume: {} holds {} passes where the sums hold {passes}; delete it to start afresh",
+                path.display(),
+                sum.passes
+            );
+        }
+        loaded.push(sum);
+    }
+    Ok(Features::from_sums(loaded.try_into().expect("one sum per name")))
+}
+
+/// Removes the features saved beside sums file `sums`, if any.
+pub fn remove_features(sums: &Path) {
+    for name in Features::NAMES {
+        let _ = std::fs::remove_file(features_path(sums, name));
+    }
 }
 
 /// Loads the sums saved for a render with this fingerprint.
