@@ -109,6 +109,13 @@ pub struct JobSettings {
     /// bundle), and `frames` lists as many frames. Empty: every frame is the job's scene.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub scenes: Vec<String>,
+    /// Sum the denoiser's features (albedo, normal; [`crate::features`]) and write them into
+    /// the EXR as channels.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub aovs: bool,
+    /// Also make a denoised preview of the image (with the features, whether or not `aovs`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub denoise: bool,
 }
 
 /// Why settings cannot be used.
@@ -158,6 +165,11 @@ fn declared_iterations(v: f64) -> Result<u64, JobError> {
 }
 
 impl JobSettings {
+    /// Whether the render sums the denoiser's features.
+    pub fn features(&self) -> bool {
+        self.aovs || self.denoise
+    }
+
     /// The settings of `frame` of the sequence `frames`: its parameters (the frame number and
     /// the ramps) and its seed, from [`crate::frames`]; one image, so no frame list.
     pub fn for_frame(&self, frames: &[u32], frame: u32) -> Result<JobSettings, crate::frames::FrameError> {

@@ -7,6 +7,7 @@
 use serde::de::DeserializeSeed;
 use serde::{Deserialize, Serialize};
 
+use crate::features::Features;
 use crate::film::FilmSum;
 use crate::parity::{OddSums, sample_len};
 use crate::render::RenderSettings;
@@ -114,6 +115,10 @@ pub struct JobStatus {
     /// every frame is, running once any started.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub frames: Vec<FrameStatus>,
+    /// Whether its checkpoints get a denoised preview (`image.denoised.exr`, `.png`): it was
+    /// submitted with `denoise`.
+    #[serde(default)]
+    pub denoise: bool,
 }
 
 /// One frame of a sequence's status. Its image is its job's (`GET /api/jobs/{job}/image.exr`).
@@ -207,25 +212,30 @@ pub struct Lease {
     /// See `width`.
     #[serde(default)]
     pub height: u32,
+    /// Whether the job asks for the denoiser's features: the result must then carry them
+    /// ([`encode_result`]), summed over the same passes ([`crate::features`]).
+    #[serde(default)]
+    pub features: bool,
 }
 
 /// The header that carries a lease's secret.
 pub const LEASE_KEY_HEADER: &str = "x-photonfarm-lease-key";
 
-/// The largest encoding of a batch result of a `width` × `height` image: results are checked
-/// against it before they are read, so no upload can be larger than its lease implies.
-pub fn max_encoded_batch(width: u32, height: u32) -> u64 {
+/// The largest encoding of a batch result of a `width` × `height` image, with the denoiser's
+/// `features` if its job asks for them: results are checked against it before they are read,
+/// so no upload can be larger than its lease implies.
+pub fn max_encoded_batch(width: u32, height: u32, features: bool) -> u64 {
     // Magic, then bincode varints: at most 5 bytes per u32, 9 per u64 (the two vectors'
     // lengths included) and 10 per zigzag i64: three sums per pixel and, with a filter wider
     // than a box, one weight.
+    let sum = 2 * 5 + 4 * 9 + width as u64 * height as u64 * 40;
     // The odd passes' sample (see [`crate::parity`]) adds its lengths, its pass count and at
-    // most 40 bytes per sampled pixel.
+    // most 40 bytes per sampled pixel; the features are three more sums.
     MAGIC.len() as u64
-        + 2 * 5
-        + 4 * 9
-        + width as u64 * height as u64 * 40
+        + sum
         + 3 * 9
         + sample_len(width, height) as u64 * 40
+        + if features { 3 * sum } else { 0 }
 }
 
 /// The coordinator's answer to a heartbeat.
@@ -257,6 +267,8 @@ pub enum CodecError {
 const MAGIC: &[u8; 8] = b"PFBATCH1";
 /// A result with its odd passes' sample: [`encode_result`].
 const MAGIC_WITH_ODD: &[u8; 8] = b"PFBATCH2";
+/// A result with its odd passes' sample and the denoiser's features: [`encode_result`].
+const MAGIC_WITH_FEATURES: &[u8; 8] = b"PFBATCH3";
 
 /// A batch's result: its exact sum and, from workers that send it, the sums of its odd passes
 /// on the sampled pixels (for the noise estimate; see [`crate::parity`]).
@@ -266,15 +278,25 @@ pub struct BatchResult {
     pub sum: FilmSum,
     /// The odd passes on the sampled pixels; None from a worker that does not send them.
     pub odd: Option<OddSums>,
+    /// The denoiser's features of the same passes, for a job that asks for them.
+    pub features: Option<Features>,
 }
 
 /// Encodes a result with its odd passes' sample (`PFBATCH2`): the full sum is encoded exactly
-/// as by [`encode_batch`], followed by the sample.
-pub fn encode_result(sum: &FilmSum, odd: &OddSums) -> Vec<u8> {
-    let mut out = MAGIC_WITH_ODD.to_vec();
-    out.extend(
-        bincode::serde::encode_to_vec((sum, odd), bincode::config::standard()).expect("sums always encode"),
-    );
+/// as by [`encode_batch`], followed by the sample; with features (`PFBATCH3`), followed by
+/// their three sums.
+pub fn encode_result(sum: &FilmSum, odd: &OddSums, features: Option<&Features>) -> Vec<u8> {
+    let config = bincode::config::standard();
+    let (magic, body) = match features {
+        None => (MAGIC_WITH_ODD, bincode::serde::encode_to_vec((sum, odd), config)),
+        Some(f) => {
+            let [albedo, normal, emitted] = f.sums();
+            let all = (sum, odd, albedo, normal, emitted);
+            (MAGIC_WITH_FEATURES, bincode::serde::encode_to_vec(all, config))
+        }
+    };
+    let mut out = magic.to_vec();
+    out.extend(body.expect("sums always encode"));
     out
 }
 
@@ -283,14 +305,48 @@ pub fn encode_result(sum: &FilmSum, odd: &OddSums) -> Vec<u8> {
 /// receiver's (a lease's, a job's): a result of another size, or one whose vectors claim more
 /// pixels, is refused before anything is allocated for it (see [`bounded`]).
 pub fn decode_result(bytes: &[u8], width: u32, height: u32) -> Result<BatchResult, CodecError> {
-    let Some(body) = bytes.strip_prefix(MAGIC_WITH_ODD.as_slice()) else {
-        return decode_batch(bytes, width, height).map(|sum| BatchResult { sum, odd: None });
+    let (body, features) = match (
+        bytes.strip_prefix(MAGIC_WITH_ODD.as_slice()),
+        bytes.strip_prefix(MAGIC_WITH_FEATURES.as_slice()),
+    ) {
+        (Some(body), _) => (body, false),
+        (_, Some(body)) => (body, true),
+        _ => {
+            return decode_batch(bytes, width, height).map(|sum| BatchResult {
+                sum,
+                odd: None,
+                features: None,
+            });
+        }
     };
-    let (sum, odd) = decode_whole(bounded::PairSeed(bounded::SumSeed { width, height }), body)?;
+    let seed = bounded::ResultSeed {
+        sum: bounded::SumSeed { width, height },
+        features,
+    };
+    let (sum, odd, features) = decode_whole(seed, body)?;
     check_sum(&sum)?;
     odd.check(sum.width, sum.height, sum.passes)
         .map_err(CodecError::Invalid)?;
-    Ok(BatchResult { sum, odd: Some(odd) })
+    let features = match features {
+        Some(sums) => {
+            for f in &sums {
+                check_sum(f)?;
+                if f.passes != sum.passes {
+                    return Err(CodecError::Invalid(format!(
+                        "features of {} passes with a sum of {}",
+                        f.passes, sum.passes
+                    )));
+                }
+            }
+            Some(Features::from_sums(sums))
+        }
+        None => None,
+    };
+    Ok(BatchResult {
+        sum,
+        odd: Some(odd),
+        features,
+    })
 }
 
 /// Decodes all of `body` with `seed`: trailing bytes are an error.
@@ -370,13 +426,17 @@ mod tests {
         worst.weights = vec![i64::MIN; 6];
         worst.passes = u64::MAX;
         worst.nonfinite = u64::MAX;
-        assert!(encode_batch(&worst).len() as u64 <= max_encoded_batch(3, 2));
+        assert!(encode_batch(&worst).len() as u64 <= max_encoded_batch(3, 2, false));
         let odd_worst = OddSums {
             sums: vec![[i64::MIN; 3]; 6],
             weights: vec![i64::MIN; 6],
             passes: u64::MAX,
         };
-        assert!(encode_result(&worst, &odd_worst).len() as u64 <= max_encoded_batch(3, 2));
+        assert!(encode_result(&worst, &odd_worst, None).len() as u64 <= max_encoded_batch(3, 2, false));
+        let features = Features::from_sums([worst.clone(), worst.clone(), worst.clone()]);
+        let with = encode_result(&worst, &odd_worst, Some(&features));
+        assert!(with.len() as u64 <= max_encoded_batch(3, 2, true));
+        assert!(with.len() as u64 > max_encoded_batch(3, 2, false));
     }
 
     #[test]
@@ -387,15 +447,42 @@ mod tests {
         let mut odd = OddSums::empty(3, 2);
         odd.sums[1] = [2, 2, 2];
         odd.passes = 1;
-        let r = decode_result(&encode_result(&f, &odd), 3, 2).unwrap();
-        assert_eq!((r.sum, r.odd), (f.clone(), Some(odd.clone())));
+        let r = decode_result(&encode_result(&f, &odd, None), 3, 2).unwrap();
+        assert_eq!((r.sum, r.odd, r.features), (f.clone(), Some(odd.clone()), None));
         assert_eq!(decode_result(&encode_batch(&f), 3, 2).unwrap().odd, None);
         // More odd passes than passes, or a sample of the wrong size, is refused.
         odd.passes = 4;
-        assert!(decode_result(&encode_result(&f, &odd), 3, 2).is_err());
-        assert!(decode_result(&encode_result(&f, &OddSums::empty(2, 2)), 3, 2).is_err());
-        let bytes = encode_result(&f, &OddSums::empty(3, 2));
+        assert!(decode_result(&encode_result(&f, &odd, None), 3, 2).is_err());
+        assert!(decode_result(&encode_result(&f, &OddSums::empty(2, 2), None), 3, 2).is_err());
+        let bytes = encode_result(&f, &OddSums::empty(3, 2), None);
         assert!(decode_result(&bytes[..bytes.len() - 1], 3, 2).is_err());
+    }
+
+    /// A result with features carries them exactly; features of other passes, another size
+    /// or cut short are refused.
+    #[test]
+    fn results_with_features_round_trip_and_are_checked() {
+        let mut f = FilmSum::new(3, 2);
+        f.sums[1] = [5, 6, 7];
+        f.passes = 2;
+        let odd = OddSums::empty(3, 2);
+        let mut features = Features::new(3, 2);
+        for (k, s) in [&mut features.albedo, &mut features.normal, &mut features.emitted]
+            .into_iter()
+            .enumerate()
+        {
+            s.sums[k] = [k as i64 + 1; 3];
+            s.passes = 2;
+        }
+        let bytes = encode_result(&f, &odd, Some(&features));
+        let r = decode_result(&bytes, 3, 2).unwrap();
+        assert_eq!((r.sum, r.features), (f.clone(), Some(features.clone())));
+        assert!(decode_result(&bytes[..bytes.len() - 1], 3, 2).is_err());
+        features.normal.passes = 3;
+        let e = decode_result(&encode_result(&f, &odd, Some(&features)), 3, 2).unwrap_err();
+        assert!(e.to_string().contains("features of 3 passes"), "{e}");
+        let other = Features::new(2, 3);
+        assert!(decode_result(&encode_result(&f, &odd, Some(&other)), 3, 2).is_err());
     }
 
     #[test]
@@ -419,7 +506,7 @@ mod tests {
             weights: Vec::new(),
             passes: 0,
         };
-        let e = decode_result(&encode_result(&f, &odd), 3, 2)
+        let e = decode_result(&encode_result(&f, &odd, None), 3, 2)
             .unwrap_err()
             .to_string();
         assert!(

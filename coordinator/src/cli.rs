@@ -85,6 +85,10 @@ pub struct WaitArgs {
     /// Download the final image here (.exr or .png).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// With --out, also download the denoised preview of a job submitted with --denoise, as
+    /// OUT with `.denoised` before its extension (as `render --denoise` names it).
+    #[arg(long, requires = "out")]
+    pub denoised: bool,
     /// The coordinator.
     #[command(flatten)]
     pub conn: ConnectionArgs,
@@ -98,6 +102,10 @@ pub struct FetchArgs {
     /// Where to write the latest image (.exr or .png).
     #[arg(long)]
     pub out: PathBuf,
+    /// Also download the denoised preview of a job submitted with --denoise, as OUT with
+    /// `.denoised` before its extension (as `render --denoise` names it).
+    #[arg(long)]
+    pub denoised: bool,
     /// The coordinator.
     #[command(flatten)]
     pub conn: ConnectionArgs,
@@ -259,6 +267,17 @@ pub struct JobArgs {
     /// goes on from the first unfinished frame; `submit`: one job of many frames).
     #[arg(long, value_name = "LIST")]
     pub frames: Option<String>,
+    /// Also make a denoised preview, made by Open Image Denoise from the image, its albedo and
+    /// its normal: `render` writes OUT with `.denoised` before its extension (`x.exr` →
+    /// `x.denoised.exr`), the farm beside each checkpoint (`fetch --denoised`). The image
+    /// itself is unchanged. Needs a build with OIDN (README).
+    #[arg(long)]
+    pub denoise: bool,
+    /// Also sum the denoiser's features, the albedo and normal of the first surface seen past
+    /// mirrors and glass, and write them into the EXR as channels `albedo.R` … `normal.B`. Costs
+    /// about one ray per pixel and pass; the EXR only (a PNG has no channels for them).
+    #[arg(long)]
+    pub aovs: bool,
 }
 
 impl JobArgs {
@@ -315,6 +334,8 @@ impl JobArgs {
             checkpoint_every: self.checkpoint_every,
             frames,
             scenes: Vec::new(),
+            aovs: self.aovs,
+            denoise: self.denoise,
         })
     }
 }
@@ -344,16 +365,6 @@ pub struct RenderArgs {
     /// How often the exact sums are saved to `OUT.resume` while rendering [default: 30].
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub save_every: Option<f64>,
-    /// Also write a denoised preview, `OUT` with `.denoised` before its extension (`x.exr` →
-    /// `x.denoised.exr`), made by Open Image Denoise from the image, its albedo and its normal
-    /// (implies --aovs). The image itself is unchanged. Needs a build with OIDN (README).
-    #[arg(long)]
-    pub denoise: bool,
-    /// Also sum the denoiser's features, the albedo and normal of the first surface seen past
-    /// mirrors and glass, and write them into the EXR as channels `albedo.R` … `normal.B`. Costs
-    /// about one ray per pixel and pass; needs an .exr output.
-    #[arg(long)]
-    pub aovs: bool,
     /// Size limits (as for `coordinator serve`).
     #[command(flatten)]
     pub limits: LimitArgs,

@@ -17,7 +17,7 @@ fn result_8x8() -> Vec<u8> {
         .iter_mut()
         .enumerate()
         .for_each(|(i, s)| *s = [i as i64 * 1000, 7, 1 << 30]);
-    encode_result(&sum, &OddSums::empty(8, 8))
+    encode_result(&sum, &OddSums::empty(8, 8), None)
 }
 
 async fn put(api: &Api, id: u64, key: &str, encoding: Option<&str>, body: Vec<u8>) -> StatusCode {

@@ -3,8 +3,11 @@
 //! feature (the README's test command enables it).
 #![cfg(feature = "denoise")]
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 use photonfarm::color::Rgb;
 use photonfarm::film::read_image;
@@ -214,4 +217,106 @@ fn converge_draws_a_denoised_twin_of_each_line() {
     assert!(last_rmse(&denoised) < 0.8 * last_rmse(&raw), "{csv}");
     let svg = std::fs::read_to_string(out.join("convergence.svg")).unwrap();
     assert!(svg.contains("path+denoised"));
+}
+
+/// The farm's done-when: a `--denoise` job on two workers, with the coordinator SIGKILLed
+/// mid-job and restarted, gives the EXR of `coordinator render` byte for byte: the raw image and
+/// its albedo and normal channels. Its denoised preview is served and fetched beside it.
+#[test]
+fn a_farm_job_with_features_survives_a_restart_and_gives_the_local_bytes() {
+    use support::{coordinator_bin, worker};
+    let dir = tempfile::tempdir().unwrap();
+    // SPPM on cbox-spheres with Mitsuba's default (Gaussian) filter: the features are splatted
+    // and weighted like the image, and merged as exactly.
+    let job = [
+        "--integrator",
+        "sppm",
+        "--iterations",
+        "40",
+        "--photons",
+        "60000",
+        "--seed",
+        "3",
+        "--checkpoint-every",
+        "16",
+        "-D",
+        "res=48",
+        "-D",
+        "filter=gaussian",
+        "--denoise",
+    ];
+    let scene = support::cbox_spheres();
+    let local = dir.path().join("local.exr");
+    let mut args = vec![scene.to_str().unwrap(), "--out", local.to_str().unwrap()];
+    args.extend(job);
+    assert!(render(&args).status.success());
+
+    let data = dir.path().join("data");
+    let bind = support::fixed_loopback_address();
+    let flags = ["--batch-seconds", "0.3", "--lease-timeout", "2"];
+    let (mut coordinator, url) = support::serve(&data, &bind, &flags, &[]);
+    let _w1 = worker(&url, "w1", dir.path());
+    let _w2 = worker(&url, "w2", dir.path());
+    let cli = |args: &[&str]| {
+        let o = Command::new(coordinator_bin()).args(args).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).trim().to_string()
+    };
+    let mut submit = vec!["submit", "--to", &url, scene.to_str().unwrap()];
+    submit.extend(job);
+    let id = cli(&submit);
+    let done = |url: &str| -> u64 {
+        let o = Command::new(coordinator_bin())
+            .args(["status", &id, "--to", url])
+            .output()
+            .unwrap();
+        let line = String::from_utf8_lossy(&o.stdout).to_string();
+        line.split_whitespace()
+            .find_map(|w| w.split_once('/').and_then(|(d, _)| d.parse().ok()))
+            .unwrap_or(0)
+    };
+    let start = Instant::now();
+    while done(&url) < 17 {
+        assert!(start.elapsed() < Duration::from_secs(120), "no passes arrived");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    coordinator.sigkill();
+    let (_coordinator, url2) = support::serve(&data, &bind, &flags, &[]);
+    assert_eq!(url, url2);
+    let farm = dir.path().join("farm.exr");
+    cli(&[
+        "wait",
+        &id,
+        "--to",
+        &url,
+        "--out",
+        farm.to_str().unwrap(),
+        "--denoised",
+    ]);
+    assert!(
+        std::fs::read(&farm).unwrap() == std::fs::read(&local).unwrap(),
+        "the farm's EXR (image, albedo, normal) differs from the local render's"
+    );
+    let (w, h, denoised) = read_image(&dir.path().join("farm.denoised.exr")).unwrap();
+    assert_eq!((w, h), (48, 48));
+    assert_ne!(denoised, read_image(&farm).unwrap().2);
+    // A job without --denoise has no preview to serve.
+    let plain = cli(&[
+        "submit",
+        "--to",
+        &url,
+        scene.to_str().unwrap(),
+        "--spp",
+        "2",
+        "-D",
+        "res=8",
+    ]);
+    cli(&["wait", &plain, "--to", &url]);
+    let o = Command::new(coordinator_bin())
+        .args(["fetch", &plain, "--to", &url, "--out"])
+        .arg(dir.path().join("p.exr"))
+        .arg("--denoised")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
 }

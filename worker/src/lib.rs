@@ -327,15 +327,23 @@ async fn work_on(
             // A lost lease stops the work before its next pass. The odd passes are also summed
             // on the sampled pixels, for the coordinator's noise estimate (photonfarm::parity).
             let radii = (!lease_r.radii.is_empty()).then_some(&lease_r.radii[..]);
-            let batch =
-                Renderer::new(&scene, &lease_r.settings).render(lease_r.start..lease_r.end, radii, &lost_r);
-            (batch.sum.passes == lease_r.end - lease_r.start).then_some((batch.sum, batch.odd))
+            // The denoiser's features too, if the job asks for them (photonfarm::features).
+            let mut renderer = Renderer::new(&scene, &lease_r.settings);
+            if lease_r.features {
+                renderer = renderer.with_features();
+            }
+            let batch = renderer.render(lease_r.start..lease_r.end, radii, &lost_r);
+            (batch.sum.passes == lease_r.end - lease_r.start).then_some((
+                batch.sum,
+                batch.odd,
+                batch.features,
+            ))
         })
     })
     .await
     .context("the render thread failed")?;
     heartbeat.abort();
-    let Some((sum, odd)) = sum else {
+    let Some((sum, odd, features)) = sum else {
         tracing::warn!(
             lease = lease.lease_id,
             "lease lost (expired or job cancelled); batch dropped"
@@ -351,7 +359,7 @@ async fn work_on(
     };
     // Compressed when the coordinator says it takes zstd (older ones get the plain encoding);
     // the outbox keeps the bytes as they will be sent.
-    let encoded = encode_result(&sum, &odd);
+    let encoded = encode_result(&sum, &odd, features.as_ref());
     let bytes = if lease.accept_encoding.iter().any(|e| e == compression::ZSTD) {
         tokio::task::spawn_blocking(move || compression::compress(&encoded))
             .await

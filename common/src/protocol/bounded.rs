@@ -23,9 +23,14 @@ pub(super) struct SumSeed {
     pub height: u32,
 }
 
-/// A `PFBATCH2` result's pair: the sum and its odd passes' sample.
+/// A `PFBATCH2` result: the sum and its odd passes' sample; with `features`, a `PFBATCH3` one,
+/// followed by the three sums of the denoiser's features (albedo, normal, emitted), each of the
+/// sum's size.
 #[derive(Clone, Copy)]
-pub(super) struct PairSeed(pub SumSeed);
+pub(super) struct ResultSeed {
+    pub sum: SumSeed,
+    pub features: bool,
+}
 
 /// An [`OddSums`] with at most `len` sampled pixels.
 struct OddSeed {
@@ -164,25 +169,41 @@ impl<'de> Visitor<'de> for OddSeed {
     }
 }
 
-impl<'de> DeserializeSeed<'de> for PairSeed {
-    type Value = (FilmSum, OddSums);
+/// What a [`ResultSeed`] reads.
+pub(super) type Decoded = (FilmSum, OddSums, Option<[FilmSum; 3]>);
+
+impl<'de> DeserializeSeed<'de> for ResultSeed {
+    type Value = Decoded;
 
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
-        d.deserialize_tuple(2, self)
+        d.deserialize_tuple(if self.features { 5 } else { 2 }, self)
     }
 }
 
-impl<'de> Visitor<'de> for PairSeed {
-    type Value = (FilmSum, OddSums);
+impl<'de> Visitor<'de> for ResultSeed {
+    type Value = Decoded;
 
     fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        write!(f, "a sum and its odd passes' sample")
+        write!(f, "a sum and its odd passes' sample")?;
+        if self.features {
+            write!(f, ", then its features")?;
+        }
+        Ok(())
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
-        let sum = field(&mut seq, self.0, "sum")?;
-        let len = sample_len(self.0.width, self.0.height);
+        let sum = field(&mut seq, self.sum, "sum")?;
+        let len = sample_len(self.sum.width, self.sum.height);
         let odd = field(&mut seq, OddSeed { len }, "odd")?;
-        Ok((sum, odd))
+        let features = if self.features {
+            Some([
+                field(&mut seq, self.sum, "albedo")?,
+                field(&mut seq, self.sum, "normal")?,
+                field(&mut seq, self.sum, "emitted")?,
+            ])
+        } else {
+            None
+        };
+        Ok((sum, odd, features))
     }
 }

@@ -180,7 +180,7 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
         }
         wait_for(&client, id).await?;
         if let Some(out) = &args.out {
-            fetch(&client, id, out).await?;
+            fetch(&client, id, out, settings.denoise).await?;
         }
         Ok(())
     })
@@ -244,11 +244,12 @@ pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
 
 /// Downloads a job's latest image to `out` (EXR or PNG by its extension). Of a sequence, every
 /// finished frame's: `out` names them as `render --frames` does (`shots/f-####.exr`), or is a
-/// folder, which gets `####.exr`.
-pub async fn fetch(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow::Result<()> {
+/// folder, which gets `####.exr`. With `denoised`, each image's denoised preview too, beside it
+/// (`x.exr` → `x.denoised.exr`).
+pub async fn fetch(client: &ApiClient, id: u64, out: &std::path::Path, denoised: bool) -> anyhow::Result<()> {
     let status = client.status(id).await?;
     if status.frames.is_empty() {
-        return fetch_image(client, id, out).await;
+        return fetch_images(client, id, out, denoised).await;
     }
     let pattern = if out.is_dir() {
         out.join("####.exr")
@@ -265,23 +266,41 @@ pub async fn fetch(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow
         bail!("job {id}: no frame is finished yet");
     }
     for f in &done {
-        fetch_image(client, f.job, &photonfarm::frames::frame_path(&pattern, f.frame)).await?;
+        let out = photonfarm::frames::frame_path(&pattern, f.frame);
+        fetch_images(client, f.job, &out, denoised).await?;
     }
     eprintln!("{} of {} frames fetched", done.len(), status.frames.len());
     Ok(())
 }
 
-/// Downloads one image.
-async fn fetch_image(client: &ApiClient, id: u64, out: &std::path::Path) -> anyhow::Result<()> {
+/// Downloads one image, and with `denoised` its denoised preview.
+async fn fetch_images(
+    client: &ApiClient,
+    id: u64,
+    out: &std::path::Path,
+    denoised: bool,
+) -> anyhow::Result<()> {
     check_output(out)?;
     let ext = out
         .extension()
         .and_then(|e| e.to_str())
         .unwrap_or("exr")
         .to_ascii_lowercase();
-    let bytes = client.image(id, &format!("image.{ext}")).await?;
-    std::fs::write(out, bytes).with_context(|| format!("cannot write {}", out.display()))?;
-    eprintln!("wrote {}", out.display());
+    let mut files = vec![(format!("image.{ext}"), out.to_path_buf())];
+    if denoised {
+        files.push((
+            format!("image.denoised.{ext}"),
+            crate::denoise::denoised_path(out),
+        ));
+    }
+    for (name, path) in files {
+        let bytes = client
+            .image(id, &name)
+            .await
+            .with_context(|| format!("job {id}: {name}"))?;
+        std::fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
     Ok(())
 }
 
@@ -346,10 +365,10 @@ pub fn run_job_command(command: &crate::cli::JobCommand) -> anyhow::Result<()> {
             JobCommand::Wait(a) => {
                 wait_for(&client, a.id).await?;
                 if let Some(out) = &a.out {
-                    fetch(&client, a.id, out).await?;
+                    fetch(&client, a.id, out, a.denoised).await?;
                 }
             }
-            JobCommand::Fetch(a) => fetch(&client, a.id, &a.out).await?,
+            JobCommand::Fetch(a) => fetch(&client, a.id, &a.out, a.denoised).await?,
             JobCommand::Cancel(a) => println!("{}", describe(&client.cancel(a.id).await?)),
         }
         Ok(())

@@ -123,7 +123,7 @@ impl Synthetic {
 
     /// The `PFBATCH2` encoding of a batch of `passes` passes of which `odd` are odd.
     pub fn encoded(&self, passes: u64, odd: u64, seed: u64) -> Vec<u8> {
-        encode_result(&self.sum(passes, seed), &self.odd(odd, seed))
+        encode_result(&self.sum(passes, seed), &self.odd(odd, seed), None)
     }
 }
 

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use photonfarm::features::{Features, write_exr_with_features};
+use photonfarm::features::{Features, write_image_with_features};
 use photonfarm::film::{FilmSum, write_image};
 use photonfarm::frames::{frame_path, parse_frames};
 use photonfarm::job::JobSettings;
@@ -27,10 +27,10 @@ use crate::service::scheduler::{JobState, Scheduler, SchedulerConfig};
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     // Check everything cheap first: a typo must not cost a long render.
     check_output(&args.out)?;
-    if args.denoise && !crate::denoise::AVAILABLE {
+    if args.job.denoise && !crate::denoise::AVAILABLE {
         bail!("--denoise: {}", crate::denoise::UNAVAILABLE);
     }
-    if args.aovs && !is_exr(&args.out) {
+    if args.job.aovs && !is_exr(&args.out) {
         bail!(
             "--aovs: {} is not an EXR, and only EXR files hold the albedo and normal channels \
              (--denoise alone works with PNG)",
@@ -118,7 +118,7 @@ fn render_image(
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
-    if args.denoise && !scene.filter.is_box() {
+    if settings.denoise && !scene.filter.is_box() {
         eprintln!(
             "warning: --denoise: the film's filter is not a box, so each sample is spread over \
              its neighbours, which Open Image Denoise cannot tell from detail: expect little \
@@ -202,8 +202,8 @@ fn render_image(
     };
     let done = prefix.passes;
     // The denoiser's features, summed beside the image and saved beside its sums.
-    let with_features = args.denoise || args.aovs;
-    let mut features = match (with_features, resume) {
+    let with_features = settings.features();
+    let features = match (with_features, resume) {
         (false, _) => None,
         (true, false) => Some(Features::new(scene.width(), scene.height())),
         (true, true) => Some(resume::load_features(
@@ -224,7 +224,7 @@ fn render_image(
     }
     scheduler.add_job(0, total, window, done, &[(0, done)], JobState::Queued);
     // A local render follows no noise estimate (no odd-pass sample).
-    let mut acc = Accumulator::new(prefix, None, window);
+    let mut acc = Accumulator::new(prefix, None, features, window);
     let save_every = Duration::from_secs_f64(args.save_every.unwrap_or(30.0));
     let mut saved = Instant::now();
     let mut save_error = None;
@@ -248,9 +248,6 @@ fn render_image(
         // SPPM's radii from the settings' schedule, as the coordinator sends them to workers.
         let batch = pool.install(|| renderer.render(grant.start..grant.end, None, interrupted));
         let sum = batch.sum;
-        if let (Some(all), Some(these)) = (features.as_mut(), &batch.features) {
-            all.add(these)?;
-        }
         if sum.passes == 0 {
             // Interrupted before the batch's first pass; the loop closes the job.
             continue;
@@ -258,20 +255,24 @@ fn render_image(
         if sum.passes == grant.end - grant.start {
             scheduler.complete(grant.lease_id, now())?;
         }
-        let checkpoints = acc.add(grant.start, sum, None)?.checkpoints;
+        let checkpoints = acc.add(grant.start, sum, None, batch.features)?.checkpoints;
         if (saved.elapsed() >= save_every || !checkpoints.is_empty()) && save_error.is_none() {
             // Keep rendering if this fails: the image may still be written.
             let saved_all = resume::save(&sums_path, &fingerprint, acc.prefix())
-                .and_then(|()| features.as_ref().map_or(Ok(()), save_features));
+                .and_then(|()| acc.features().map_or(Ok(()), save_features));
             if let Err(e) = saved_all {
                 save_error = Some(format!("{e:#}"));
             }
             saved = Instant::now();
         }
         for cp in checkpoints {
-            if cp.passes < total
+            let write = |path: &Path| -> Result<(), photonfarm::film::FilmError> {
+                let (w, h) = (cp.sum.width, cp.sum.height);
+                write_image_with_features(&cp.sum.image()?, w, h, cp.features.as_ref(), path)
+            };
+            if cp.sum.passes < total
                 && checkpoint_error.is_none()
-                && let Err(e) = cp.write(&checkpoint_path(out, cp.passes))
+                && let Err(e) = write(&checkpoint_path(out, cp.sum.passes))
             {
                 // Keep rendering: the final image may still be written.
                 checkpoint_error = Some(e.to_string());
@@ -300,10 +301,8 @@ fn render_image(
         eprintln!("warning: the sums for --resume were not saved: {e}");
     }
     let image = film.image()?;
-    match &features {
-        Some(f) if is_exr(out) => write_exr_with_features(&image, f, out)?,
-        _ => write_image(&image, film.width, film.height, out)?,
-    }
+    let features = acc.features();
+    write_image_with_features(&image, film.width, film.height, features, out)?;
     // A render that reached its pass count needs no sums; one that stopped early keeps them for
     // --resume.
     let finished = film.passes >= total;
@@ -312,12 +311,12 @@ fn render_image(
         resume::remove_features(&sums_path);
     } else {
         resume::save(&sums_path, &fingerprint, film)?;
-        if let Some(f) = &features {
+        if let Some(f) = features {
             save_features(f)?;
         }
     }
-    if args.denoise
-        && let Some(f) = &features
+    if settings.denoise
+        && let Some(f) = features
     {
         // After the image and its sums are safe: a failing denoiser loses no work.
         let t = Instant::now();

@@ -14,6 +14,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::{Arc, Mutex};
 
+use photonfarm::features::Features;
 use photonfarm::film::FilmSum;
 use photonfarm::parity::OddSums;
 use photonfarm::protocol::Lease;
@@ -47,6 +48,10 @@ pub struct BatchSum {
     /// The odd passes' sample so far; None once a part came without one.
     pub odd: Option<OddSums>,
     odd_known: bool,
+    /// The denoiser's features so far, for a job that asks for them; None once a part came
+    /// without them.
+    pub features: Option<Features>,
+    features_known: bool,
 }
 
 impl BatchSum {
@@ -57,17 +62,20 @@ impl BatchSum {
             sum: None,
             odd: None,
             odd_known: true,
+            features: None,
+            features_known: true,
         }
     }
 
     /// Adds a part's sum of passes [start, start + sum.passes) with its odd passes' sample
-    /// (None: not sent; a one-pass part's is known from its parity). Returns whether the batch
-    /// is complete.
+    /// (None: not sent; a one-pass part's is known from its parity) and its features (None:
+    /// not sent). Returns whether the batch is complete.
     pub fn add(
         &mut self,
         start: u64,
         sum: FilmSum,
         odd: Option<OddSums>,
+        features: Option<Features>,
     ) -> Result<bool, photonfarm::film::FilmError> {
         let odd = odd.or_else(|| match sum.passes {
             1 if start % 2 == 1 => Some(OddSums::of(&sum)),
@@ -85,6 +93,14 @@ impl BatchSum {
             _ => {
                 self.odd = None;
                 self.odd_known = false;
+            }
+        }
+        match (features, self.features.as_mut()) {
+            (Some(f), Some(mine)) => mine.add(&f)?,
+            (Some(f), None) if self.features_known => self.features = Some(f),
+            _ => {
+                self.features = None;
+                self.features_known = false;
             }
         }
         self.added += passes;
@@ -126,6 +142,8 @@ pub struct PartInfo {
     pub width: u32,
     /// See `width`.
     pub height: u32,
+    /// Whether the result must carry the denoiser's features.
+    pub features: bool,
 }
 
 /// Failures of parts of one batch after which the batch is given up upstream.
@@ -257,6 +275,7 @@ impl Book {
             end: part.end,
             width: up.width,
             height: up.height,
+            features: up.features,
         })
     }
 
@@ -383,6 +402,7 @@ mod tests {
             accept_encoding: Vec::new(),
             width: 2,
             height: 1,
+            features: false,
         }
     }
 
@@ -422,7 +442,7 @@ mod tests {
             complete = sum
                 .lock()
                 .unwrap()
-                .add(l.start, film(l.start, l.end), Some(odd))
+                .add(l.start, film(l.start, l.end), Some(odd), None)
                 .unwrap();
         }
         assert!(complete);
@@ -487,9 +507,12 @@ mod tests {
     #[test]
     fn a_part_without_odd_passes_sends_the_batch_without_them() {
         let mut s = BatchSum::new(5);
-        assert!(!s.add(0, film(0, 1), None).unwrap(), "one pass: parity known");
+        assert!(
+            !s.add(0, film(0, 1), None, None).unwrap(),
+            "one pass: parity known"
+        );
         assert!(s.odd.is_some());
-        assert!(s.add(1, film(1, 5), None).unwrap());
+        assert!(s.add(1, film(1, 5), None, None).unwrap());
         assert!(s.odd.is_none());
         assert_eq!(s.sum.unwrap(), film(0, 5));
     }

@@ -305,7 +305,7 @@ async fn result(
         ));
     }
     let (width, height) = (info.width, info.height);
-    let max = max_encoded_batch(width, height);
+    let max = max_encoded_batch(width, height, info.features);
     let (body, _slot) = read_result_body(&headers, req, encoding, max, &relay.uploads)
         .await
         .map_err(|e| match e {
@@ -336,7 +336,9 @@ async fn result(
     };
     let passes = info.end - info.start;
     let odd_passes = info.end / 2 - info.start / 2;
-    let fits = r.sum.passes == passes && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes);
+    let fits = r.sum.passes == passes
+        && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes)
+        && r.features.is_some() == info.features;
     if !fits {
         let msg = format!(
             "result does not match the lease: expected {passes} passes ({odd_passes} odd), got {}x{} with {}",
@@ -349,7 +351,7 @@ async fn result(
     let start = info.start;
     let complete = tokio::task::spawn_blocking(move || {
         let mut s = sum.lock().unwrap_or_else(|p| p.into_inner());
-        s.add(start, r.sum, r.odd).map_err(|e| e.to_string())
+        s.add(start, r.sum, r.odd, r.features).map_err(|e| e.to_string())
     })
     .await
     .map_err(bad_gateway)?
@@ -373,8 +375,9 @@ async fn forward(relay: Arc<Relay>, lease: Lease) {
     let body = tokio::task::spawn_blocking(move || {
         let s = sum.lock().unwrap_or_else(|p| p.into_inner());
         let film = s.sum.as_ref()?;
+        // Features travel with the odd sample (PFBATCH3): see BatchSum::add.
         let plain = match &s.odd {
-            Some(odd) => encode_result(film, odd),
+            Some(odd) => encode_result(film, odd, s.features.as_ref()),
             None => encode_batch(film),
         };
         Some(Bytes::from(if compress {

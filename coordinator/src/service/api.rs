@@ -344,6 +344,11 @@ fn accept_bundle(
             _ => ApiError::new(StatusCode::BAD_REQUEST, e.to_string()),
         })?;
     settings.check_defines().map_err(|e| bad(e.to_string()))?;
+    if settings.denoise && !crate::denoise::AVAILABLE {
+        return Err(bad(format!("denoise: {}", crate::denoise::UNAVAILABLE)));
+    }
+    // A job with features holds four sums of its film (the image and three features).
+    let sums_per_pixel: u64 = if settings.features() { 4 } else { 1 };
     let scene_rel =
         match scene {
             Some(s) => PathBuf::from(s),
@@ -416,6 +421,14 @@ fn accept_bundle(
                     &checked.render,
                 )
                 .map_err(|e| bad(e.to_string()))?;
+            let px = checked.width as u64 * checked.height as u64;
+            if px * sums_per_pixel > limits.job.max_pixels {
+                return Err(too_large(format!(
+                    "with the denoiser's features a job holds four sums of its {px}-pixel film, above the \
+                     limit of {} pixels (--max-pixels)",
+                    limits.job.max_pixels
+                )));
+            }
             Ok(checked)
         })
     };
@@ -448,7 +461,7 @@ fn accept_bundle(
                     .for_frame(&frames, frame)
                     .map_err(|e| bad(e.to_string()))?;
                 let c = check(&scene, &frame_settings)?;
-                let px = c.width as u64 * c.height as u64;
+                let px = c.width as u64 * c.height as u64 * sums_per_pixel;
                 pixels += px;
                 // Judged from the first frame before checking the others: each check loads
                 // the scene.
@@ -474,9 +487,15 @@ fn accept_bundle(
     // Everything that takes time or memory, before the lock: the empty sums, the archive and
     // its unpacked files in their content-addressed places.
     let window = settings.checkpoint_every.unwrap_or(0);
-    let single = frames
-        .is_none()
-        .then(|| Accumulator::empty(checked.width, checked.height, window));
+    let empty = |w, h| {
+        let sum = Accumulator::empty(w, h, window);
+        if settings.features() {
+            sum.with_features()
+        } else {
+            sum
+        }
+    };
+    let single = frames.is_none().then(|| empty(checked.width, checked.height));
     let frames: Option<Vec<FrameJob>> = frames.map(|f| {
         f.into_iter()
             .map(|(frame, scene, settings, c)| FrameJob {
@@ -485,7 +504,7 @@ fn accept_bundle(
                 settings,
                 render: c.render,
                 total: c.total,
-                sum: Accumulator::empty(c.width, c.height, window),
+                sum: empty(c.width, c.height),
             })
             .collect()
     });
@@ -614,17 +633,21 @@ async fn image(
     Path((id, file)): Path<(String, String)>,
 ) -> ApiResult<Response> {
     let id = parse_id(&id)?;
-    let (ext, mime) = match file.as_str() {
-        "image.exr" => ("exr", "image/x-exr"),
-        "image.png" => ("png", "image/png"),
+    let (name, ext) = match file.as_str() {
+        "image.exr" => ("image", "exr"),
+        "image.png" => ("image", "png"),
+        "image.denoised.exr" => ("image.denoised", "exr"),
+        "image.denoised.png" => ("image.denoised", "png"),
         _ => {
             return Err(ApiError::new(
                 StatusCode::NOT_FOUND,
-                "images are image.exr and image.png",
+                "images are image.exr and image.png, and for a job with --denoise \
+                 image.denoised.exr and image.denoised.png",
             ));
         }
     };
-    let path = with_farm(&state, |f| f.image(id, ext))?;
+    let mime = if ext == "exr" { "image/x-exr" } else { "image/png" };
+    let path = with_farm(&state, |f| f.image(id, name, ext))?;
     stream_file(&path, mime).await
 }
 
@@ -707,7 +730,7 @@ async fn result(
     // Refuse a dead lease, or one of another worker, before reading a large body.
     let expected = with_farm(&state, |f| f.expected_result(id, &key))?;
     let _receiving = Receiving::claim(&state, id)?;
-    let max = max_encoded_batch(expected.width, expected.height);
+    let max = max_encoded_batch(expected.width, expected.height, expected.features);
     let batch = StoredBatch {
         start: expected.start,
         end: expected.end,
@@ -825,7 +848,7 @@ fn store_result(
     let body = std::fs::read(state.layout.received_path(expected.job, batch)).map_err(storage_error)?;
     // Odd passes in [start, end): those the odd-pass sample, if sent, must hold.
     let odd_passes = expected.end / 2 - expected.start / 2;
-    let max = max_encoded_batch(expected.width, expected.height);
+    let max = max_encoded_batch(expected.width, expected.height, expected.features);
     let plain = match compression::decompress_bounded(encoding, &body, max) {
         Ok(p) => p,
         Err(e @ CompressionError::TooLarge(_)) => {
@@ -840,16 +863,26 @@ fn store_result(
     let decoded = decode_result(&plain, expected.width, expected.height);
     drop(plain);
     drop(body);
-    let (sum, odd) = match decoded {
+    let (sum, odd, features) = match decoded {
         Ok(r)
             if (r.sum.width, r.sum.height) == (expected.width, expected.height)
                 && r.sum.passes == expected.end - expected.start
-                && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes) =>
+                && r.odd.as_ref().is_none_or(|o| o.passes == odd_passes)
+                && r.features.is_some() == expected.features =>
         {
-            (r.sum, r.odd)
+            (r.sum, r.odd, r.features)
         }
         other => {
             let msg = match other {
+                Ok(r) if r.features.is_some() != expected.features => {
+                    if expected.features {
+                        "the job asks for the denoiser's features (--aovs, --denoise) and the result has none: \
+                         is the worker older than the coordinator?"
+                            .to_string()
+                    } else {
+                        "the result carries features its job did not ask for".to_string()
+                    }
+                }
                 Ok(r)
                     if r.sum.passes == expected.end - expected.start
                         && (r.sum.width, r.sum.height) == (expected.width, expected.height) =>
@@ -880,8 +913,9 @@ fn store_result(
         .layout
         .keep_received(expected.job, batch)
         .map_err(storage_error)?;
+    // The committed lease's job is the expected one's (`expected.job`).
     let Committed {
-        job,
+        job: _,
         sum: job_sum,
         total,
     } = match with_farm(state, |f| f.commit(id, key, len)) {
@@ -896,48 +930,59 @@ fn store_result(
             return Err(e);
         }
     };
-    merge(state, job, &job_sum, total, expected.start, sum, odd)
+    merge(state, &expected, &job_sum, total, sum, odd, features)
 }
 
 /// Adds a counted result to its job's sum under the job's lock; writes the prefix and the
 /// images at a checkpoint or at the end; then tells the farm the noise estimates and the
 /// checkpoint (the farm's lock is never taken under the job's).
-#[allow(clippy::too_many_arguments)]
 fn merge(
     state: &AppState,
-    job: u64,
+    expected: &crate::service::farm::Expected,
     job_sum: &crate::service::farm::JobSum,
     total: u64,
-    start: u64,
     sum: photonfarm::film::FilmSum,
     odd: Option<photonfarm::parity::OddSums>,
+    features: Option<photonfarm::features::Features>,
 ) -> ApiResult<()> {
+    let job = expected.job;
     let mut acc = job_sum.lock().unwrap_or_else(|p| p.into_inner());
     let merged = acc
-        .add(start, sum, odd)
+        .add(expected.start, sum, odd, features)
         .map_err(|e| ApiError::internal(format!("job {job}: {e}")))?;
     let finished = acc.prefix_passes() >= total;
     let image = if finished {
-        Some(acc.prefix())
+        Some((acc.prefix(), acc.features()))
     } else {
-        merged.checkpoints.last()
+        merged.checkpoints.last().map(|c| (&c.sum, c.features.as_ref()))
     };
+    let mut preview = None;
     let written = match image {
         None => None,
-        Some(image) => {
+        Some((image, features)) => {
             // The prefix file first: the checkpoint images must never be ahead of it.
             let storage = |e| ApiError::internal(format!("storage: {e}"));
             let started = std::time::Instant::now();
             state
                 .layout
-                .write_prefix(job, acc.prefix(), acc.odd())
+                .write_prefix(job, acc.prefix(), acc.odd(), acc.features())
                 .map_err(storage)?;
-            state.layout.write_images(job, image).map_err(storage)?;
+            state.layout.write_images(job, image, features).map_err(storage)?;
             state.metrics.observe_checkpoint(started.elapsed());
+            if expected.denoise {
+                preview = features.map(|f| (image.clone(), f.clone()));
+            }
             Some((acc.prefix_passes(), image.passes))
         }
     };
     drop(acc);
+    // The denoised preview outside the job's lock (OIDN takes seconds on a large film); a
+    // failure costs the preview, never the checkpoint.
+    if let Some((image, features)) = preview
+        && let Err(e) = state.layout.write_denoised(job, &image, &features)
+    {
+        tracing::warn!(job, "no denoised preview: {e}");
+    }
     with_farm(state, |f| {
         f.record_noise(job, &merged.noise);
         match written {

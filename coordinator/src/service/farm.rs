@@ -18,6 +18,7 @@ use std::hash::{BuildHasher, Hasher};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use photonfarm::features::Features;
 use photonfarm::job::JobSettings;
 use photonfarm::limits::Limits;
 use photonfarm::protocol::{HeartbeatReply, Lease, LeaseRequest};
@@ -87,6 +88,10 @@ struct JobEntry {
     scene: String,
     bundle: String,
     defines: Vec<(String, String)>,
+    /// Whether workers sum the denoiser's features for it (`--aovs`, `--denoise`).
+    features: bool,
+    /// Whether its checkpoints get a denoised preview.
+    denoise: bool,
     width: u32,
     height: u32,
     total: u64,
@@ -196,6 +201,10 @@ pub struct Expected {
     pub width: u32,
     /// Image height.
     pub height: u32,
+    /// Whether the result must carry the denoiser's features.
+    pub features: bool,
+    /// Whether checkpoints get a denoised preview.
+    pub denoise: bool,
 }
 
 /// The farm and its store, each behind its own lock (see the module's note).
@@ -320,10 +329,7 @@ impl Farm {
             if row.frames.is_some() {
                 // A sequence: bookkeeping over its frames' jobs, restored below as any job.
                 let settings: JobSettings = serde_json::from_str(&row.settings).unwrap_or_default();
-                jobs.insert(
-                    id,
-                    entry_of(&row, placeholder_render(&row), settings.defines, None),
-                );
+                jobs.insert(id, entry_of(&row, placeholder_render(&row), &settings, None));
                 continue;
             }
             match restore(store, &row, &config.limits) {
@@ -350,7 +356,10 @@ impl Farm {
                     scheduler.add_job(id, row.total, row.window, row.next_start, &[], JobState::Failed);
                     scheduler.set_failed(id, message.clone());
                     saved.insert(id, (JobState::Failed, row.next_start, Some(message)));
-                    jobs.insert(id, entry_of(&row, placeholder_render(&row), Vec::new(), None));
+                    jobs.insert(
+                        id,
+                        entry_of(&row, placeholder_render(&row), &JobSettings::default(), None),
+                    );
                 }
             }
         }
@@ -484,7 +493,7 @@ impl Farm {
         };
         let row = JobRow::from(&new);
         self.writes.push(Write::InsertJob(new));
-        let mut entry = entry_of(&row, render, settings.defines.clone(), None);
+        let mut entry = entry_of(&row, render, settings, None);
         entry.frames = ids.clone();
         self.jobs.insert(id, entry);
         let last = ids.last().map_or(id, |f| f.1);
@@ -533,12 +542,7 @@ impl Farm {
         self.saved.insert(id, (JobState::Queued, 0, None));
         self.jobs.insert(
             id,
-            entry_of(
-                &row,
-                render,
-                settings.defines.clone(),
-                Some(Arc::new(Mutex::new(sum))),
-            ),
+            entry_of(&row, render, &settings, Some(Arc::new(Mutex::new(sum)))),
         );
         id
     }
@@ -597,6 +601,7 @@ impl Farm {
             accept_encoding: vec![photonfarm::compression::ZSTD.to_string()],
             width: job.width,
             height: job.height,
+            features: job.features,
         };
         Ok(Some(lease))
     }
@@ -638,6 +643,8 @@ impl Farm {
             end: g.end,
             width: job.width,
             height: job.height,
+            features: job.features,
+            denoise: job.denoise,
         })
     }
 
@@ -923,6 +930,7 @@ impl Farm {
                     checkpoint_iterations: f.checkpoint_iterations,
                 })
                 .collect(),
+            denoise: seq.denoise,
         }
     }
 
@@ -955,6 +963,7 @@ impl Farm {
             sequence: job.frame_of.map(|f| f.0),
             frame: job.frame_of.map(|f| f.1),
             frames: Vec::new(),
+            denoise: job.denoise,
         })
     }
 
@@ -984,17 +993,17 @@ impl Farm {
 
     /// The path of a job's latest checkpoint image.
     /// Of a sequence: its latest frame (in the order given) with an image.
-    pub fn image(&self, id: u64, ext: &str) -> Result<std::path::PathBuf, FarmError> {
+    pub fn image(&self, id: u64, name: &str, ext: &str) -> Result<std::path::PathBuf, FarmError> {
         let job = self.jobs.get(&id).ok_or(FarmError::NoJob(id))?;
         if !job.frames.is_empty() {
             return job
                 .frames
                 .iter()
                 .rev()
-                .find_map(|&(_, frame)| self.image(frame, ext).ok())
+                .find_map(|&(_, frame)| self.image(frame, name, ext).ok())
                 .ok_or(FarmError::NoImage(id));
         }
-        let path = self.layout.image_path(id, ext);
+        let path = self.layout.image_path_named(id, name, ext);
         if job.image_passes > 0 && path.exists() {
             Ok(path)
         } else {
@@ -1051,18 +1060,15 @@ impl Farm {
     }
 }
 
-fn entry_of(
-    row: &JobRow,
-    render: RenderSettings,
-    defines: Vec<(String, String)>,
-    sum: Option<JobSum>,
-) -> JobEntry {
+fn entry_of(row: &JobRow, render: RenderSettings, settings: &JobSettings, sum: Option<JobSum>) -> JobEntry {
     JobEntry {
         created_ms: row.created_ms,
         render,
         scene: row.scene.clone(),
         bundle: row.bundle.clone(),
-        defines,
+        defines: settings.defines.clone(),
+        features: settings.features(),
+        denoise: settings.denoise,
         width: row.width,
         height: row.height,
         total: row.total,
@@ -1116,7 +1122,7 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
         if row.state == JobState::Done {
             image_passes = row.total;
         }
-        let mut entry = entry_of(row, render, settings.defines, None);
+        let mut entry = entry_of(row, render, &settings, None);
         entry.image_passes = image_passes;
         entry.noise = store.load_noise(row.id).map_err(|e| e.to_string())?;
         entry.noise_saved = entry.noise.len();
@@ -1138,7 +1144,13 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
             prefix.width, prefix.height, row.width, row.height
         ));
     }
-    let mut acc = Accumulator::new(prefix, stored.odd, row.window);
+    // A job with features that has stored no prefix yet starts from empty features.
+    let features = match stored.features {
+        Some(f) => Some(f),
+        None if settings.features() && prefix.passes == 0 => Some(Features::new(row.width, row.height)),
+        None => None,
+    };
+    let mut acc = Accumulator::new(prefix, stored.odd, features, row.window);
     let mut done = vec![(0, acc.prefix_passes())];
     let mut noise = store.load_noise(row.id).map_err(|e| e.to_string())?;
     let noise_saved = noise.len();
@@ -1150,7 +1162,7 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
         let added = layout
             .load_batch(row.id, batch, row.width, row.height)
             .and_then(|r| {
-                acc.add(start, r.sum, r.odd)
+                acc.add(start, r.sum, r.odd, r.features)
                     .map_err(|e| StoreError::Corrupt(format!("batch {start}..{end}"), e.to_string()))
             })
             .map(|merged| noise.extend(merged.noise.into_iter().filter(|p| p.0 > last_saved)));
@@ -1169,9 +1181,15 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
     if acc.prefix_passes() >= row.total {
         // Every pass was stored but the coordinator stopped before finishing the job.
         layout
-            .write_prefix(row.id, acc.prefix(), acc.odd())
-            .and_then(|_| layout.write_images(row.id, acc.prefix()))
+            .write_prefix(row.id, acc.prefix(), acc.odd(), acc.features())
+            .and_then(|_| layout.write_images(row.id, acc.prefix(), acc.features()))
             .map_err(|e| e.to_string())?;
+        if settings.denoise
+            && let Some(f) = acc.features()
+            && let Err(e) = layout.write_denoised(row.id, acc.prefix(), f)
+        {
+            tracing::warn!(job = row.id, "no denoised preview: {e}");
+        }
         store
             .apply(&[
                 Write::ForgetMerged {
@@ -1188,7 +1206,7 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
         state = JobState::Done;
     }
     let sum = (!state.is_final()).then(|| Arc::new(Mutex::new(acc)));
-    let mut entry = entry_of(row, render, settings.defines, sum);
+    let mut entry = entry_of(row, render, &settings, sum);
     entry.image_passes = image_passes;
     entry.noise = noise;
     entry.noise_saved = noise_saved;
@@ -1256,10 +1274,10 @@ mod tests {
         let mut part = FilmSum::new(4, 4);
         part.passes = 1;
         let mut acc = c.sum.lock().unwrap();
-        acc.add(0, part, None).unwrap();
+        acc.add(0, part, None, None).unwrap();
         let layout = farm.read(|f| f.layout());
-        layout.write_prefix(done, acc.prefix(), acc.odd()).unwrap();
-        layout.write_images(done, acc.prefix()).unwrap();
+        layout.write_prefix(done, acc.prefix(), acc.odd(), None).unwrap();
+        layout.write_images(done, acc.prefix(), None).unwrap();
         drop(acc);
         assert_eq!(
             farm.read(|f| f.status(done)).unwrap().state,

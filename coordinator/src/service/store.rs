@@ -8,11 +8,13 @@
 //! photonfarm.sqlite           jobs, completed batches not yet merged, the lease id base
 //! bundles/HASH.tar, HASH/     job bundles, content-addressed, and their unpacked files
 //! jobs/ID/prefix.bin          passes [0, N) summed (the accumulator's prefix), with its odd
-//!                             passes on the sampled pixels (photonfarm::parity)
+//!                             passes on the sampled pixels (photonfarm::parity) and, for a
+//!                             job with --aovs or --denoise, its features (photonfarm::features)
 //! jobs/ID/batch-S-E-lL.bin    result of passes [S, E) delivered under lease L, not yet
 //!                             merged into the prefix (batch-S-E.bin: stored before lease ids
 //!                             were part of the name)
-//! jobs/ID/image.exr, .png     the latest checkpoint
+//! jobs/ID/image.exr, .png     the latest checkpoint (the EXR with the features' channels)
+//! jobs/ID/image.denoised.*    its denoised preview, for a job with --denoise
 //! ```
 //!
 //! Job ids are never reused, even if the database is lost or replaced by an older copy: a new
@@ -24,7 +26,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use photonfarm::film::FilmSum;
+use photonfarm::features::{Features, write_image_with_features};
+use photonfarm::film::{FilmError, FilmSum};
 use photonfarm::parity::OddSums;
 use photonfarm::protocol::{BatchResult, decode_result, encode_batch, encode_result, max_encoded_batch};
 use rusqlite::{Connection, OptionalExtension, params};
@@ -268,6 +271,11 @@ pub struct Store {
     commits: Arc<AtomicU64>,
 }
 
+/// An image that cannot be made or written, as a storage error naming its file.
+fn film_error(path: &Path, e: FilmError) -> StoreError {
+    StoreError::Io(path.display().to_string(), std::io::Error::other(e.to_string()))
+}
+
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
     move |e| StoreError::Io(path.display().to_string(), e)
 }
@@ -343,7 +351,13 @@ impl Layout {
 
     /// Where a job's latest checkpoint image is.
     pub fn image_path(&self, id: u64, ext: &str) -> PathBuf {
-        self.job_dir(id).join(format!("image.{ext}"))
+        self.image_path_named(id, "image", ext)
+    }
+
+    /// A job's image `name.ext`: `image` (the latest checkpoint) or `image.denoised` (its
+    /// denoised preview).
+    pub fn image_path_named(&self, id: u64, name: &str, ext: &str) -> PathBuf {
+        self.job_dir(id).join(format!("{name}.{ext}"))
     }
 
     /// Where a batch's result is kept until merged. The name holds the lease that delivered
@@ -380,24 +394,67 @@ impl Layout {
     }
 
     /// Stores a job's prefix (passes [0, N) summed) durably, with its odd passes' sample if
-    /// known (one file, so the two always agree).
-    pub fn write_prefix(&self, job: u64, prefix: &FilmSum, odd: Option<&OddSums>) -> Result<(), StoreError> {
+    /// known and its features if the job has them (one file, so they always agree).
+    pub fn write_prefix(
+        &self,
+        job: u64,
+        prefix: &FilmSum,
+        odd: Option<&OddSums>,
+        features: Option<&Features>,
+    ) -> Result<(), StoreError> {
+        // Features travel with the odd sample (PFBATCH3): a prefix without one (merged from a
+        // worker too old for either) has no features either.
         let bytes = match odd {
-            Some(odd) => encode_result(prefix, odd),
+            Some(odd) => encode_result(prefix, odd, features),
             None => encode_batch(prefix),
         };
         write_durably(&self.job_dir(job).join("prefix.bin"), &bytes)
     }
 
-    /// Writes the checkpoint images (EXR and PNG) atomically.
-    pub fn write_images(&self, job: u64, sum: &FilmSum) -> Result<(), StoreError> {
+    /// Writes the checkpoint images (EXR and PNG) atomically; with features, the EXR carries
+    /// them as channels.
+    pub fn write_images(
+        &self,
+        job: u64,
+        sum: &FilmSum,
+        features: Option<&Features>,
+    ) -> Result<(), StoreError> {
+        let image = sum
+            .image()
+            .map_err(|e| film_error(&self.image_path(job, "exr"), e))?;
+        self.write_image_files(job, "image", &image, sum.width, sum.height, features)
+    }
+
+    /// Writes the denoised preview of a checkpoint (`image.denoised.exr` and `.png`)
+    /// atomically.
+    pub fn write_denoised(&self, job: u64, sum: &FilmSum, features: &Features) -> Result<(), StoreError> {
+        let path = self.image_path_named(job, "image.denoised", "exr");
+        let image = sum.image().map_err(|e| film_error(&path, e))?;
+        let denoised = crate::denoise::denoise(&image, features).map_err(|e| {
+            StoreError::Io(
+                path.display().to_string(),
+                std::io::Error::other(format!("{e:#}")),
+            )
+        })?;
+        self.write_image_files(job, "image.denoised", &denoised, sum.width, sum.height, None)
+    }
+
+    /// Writes `name.exr` and `name.png` of a job atomically.
+    fn write_image_files(
+        &self,
+        job: u64,
+        name: &str,
+        pixels: &[photonfarm::color::Rgb],
+        width: u32,
+        height: u32,
+        features: Option<&Features>,
+    ) -> Result<(), StoreError> {
         for ext in ["exr", "png"] {
-            let path = self.image_path(job, ext);
-            let tmp = self.job_dir(job).join(format!("image-tmp.{ext}"));
+            let path = self.image_path_named(job, name, ext);
+            let tmp = self.job_dir(job).join(format!("{name}-tmp.{ext}"));
             std::fs::create_dir_all(self.job_dir(job)).map_err(io(&tmp))?;
-            sum.write(&tmp).map_err(|e| {
-                StoreError::Io(tmp.display().to_string(), std::io::Error::other(e.to_string()))
-            })?;
+            write_image_with_features(pixels, width, height, features, &tmp)
+                .map_err(|e| film_error(&tmp, e))?;
             std::fs::rename(&tmp, &path).map_err(io(&path))?;
         }
         Ok(())
@@ -413,6 +470,7 @@ impl Layout {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(BatchResult {
                 sum: FilmSum::new(width, height),
                 odd: Some(OddSums::empty(width, height)),
+                features: None,
             }),
             Err(e) => Err(StoreError::Io(path.display().to_string(), e)),
         }
@@ -430,7 +488,7 @@ impl Layout {
         let path = self.batch_path(job, b);
         let corrupt = |e: String| StoreError::Corrupt(path.display().to_string(), e);
         let bytes = std::fs::read(&path).map_err(io(&path))?;
-        let bytes = photonfarm::compression::decode_stored(bytes, max_encoded_batch(width, height))
+        let bytes = photonfarm::compression::decode_stored(bytes, max_encoded_batch(width, height, true))
             .map_err(|e| corrupt(e.to_string()))?;
         decode_result(&bytes, width, height).map_err(|e| corrupt(e.to_string()))
     }
