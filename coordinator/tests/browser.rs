@@ -198,6 +198,12 @@ async fn web_page_in_headless_chromium() {
             "res=32",
         ],
     );
+    // A job with a denoised preview: its page offers raw and denoised (builds with OIDN).
+    #[cfg(feature = "denoise")]
+    let denoised = submit(
+        &url,
+        &["--integrator", "path", "--spp", "16", "-D", "res=64", "--denoise"],
+    );
     let _w1 = worker_with_env(&url, "render-a", dir.path(), &env);
     let _w2 = worker_with_env(&url, "render-b", dir.path(), &env);
 
@@ -329,8 +335,45 @@ async fn web_page_in_headless_chromium() {
     assert_eq!(strip, json!(expected.join(" ")));
     screenshot(&c, "web-frames.png").await;
 
-    // Cancel from the job's page.
+    // The denoised job's page: raw first, then the denoised preview at the toggle's word.
+    #[cfg(feature = "denoise")]
+    {
+        c.goto(&format!("{url}/#/jobs/{denoised}")).await.unwrap();
+        let raw = "const i = document.getElementById('job-image');
+             return !document.getElementById('view-toggle').hidden && i && i.complete
+                 && i.naturalWidth === 64 && i.dataset.view";
+        assert_eq!(
+            wait_js(&c, "the raw image", Duration::from_secs(60), raw).await,
+            json!("image")
+        );
+        c.execute(
+            "document.querySelector('#view-toggle input[value=\"image.denoised\"]').click()",
+            vec![],
+        )
+        .await
+        .unwrap();
+        let shown = wait_js(
+            &c,
+            "the denoised preview",
+            Duration::from_secs(30),
+            "const i = document.getElementById('job-image');
+             return i && i.complete && i.naturalWidth === 64 && i.dataset.view === 'image.denoised'
+                 && i.dataset.view",
+        )
+        .await;
+        assert_eq!(shown, json!("image.denoised"));
+        screenshot(&c, "web-denoised.png").await;
+    }
+
+    // Cancel from the job's page, which offers no denoised view (not asked for).
     c.goto(&format!("{url}/#/jobs/{running}")).await.unwrap();
+    wait_js(
+        &c,
+        "the job page without a view toggle",
+        Duration::from_secs(20),
+        "const t = document.getElementById('view-toggle'); return t && t.hidden",
+    )
+    .await;
     c.wait()
         .for_element(Locator::Id("cancel"))
         .await

@@ -102,6 +102,13 @@ const views = {
     if (!state.built) {
       state.built = true;
       state.img = h('img', { id: 'job-image', alt: 'latest checkpoint of job ' + id });
+      // Raw or denoised, for a job submitted with --denoise; the choice holds across refreshes.
+      state.view = 'image';
+      const choice = (name, label) => h('label', null,
+        h('input', { type: 'radio', name: 'view', value: name, checked: name === 'image' ? '' : null,
+          onchange: () => { state.view = name; state.imagePasses = -1; refresh(); } }), ' ' + label);
+      state.toggle = h('div', { id: 'view-toggle', hidden: '' },
+        choice('image', 'Raw'), choice('image.denoised', 'Denoised'));
       state.imageBox = h('div', { id: 'image-box' }, h('span', { class: 'empty' }, 'no checkpoint yet'));
       state.details = h('dl', { id: 'job-details' });
       state.title = h('h2', { id: 'job-title' });
@@ -116,7 +123,7 @@ const views = {
       state.thumbs = new Map();
       root.replaceChildren(state.title,
         h('div', { class: 'cards' },
-          h('div', { class: 'card' }, h('h3', null, 'Latest checkpoint'), state.imageBox),
+          h('div', { class: 'card' }, h('h3', null, 'Latest checkpoint'), state.toggle, state.imageBox),
           h('div', { class: 'stack' },
             h('div', { class: 'card' }, h('h3', null, 'Status'), state.details, state.cancel, state.error),
             h('div', { class: 'card' }, h('h3', null, 'Convergence, without a reference'), state.chart,
@@ -134,15 +141,13 @@ const views = {
     if (j.message) rows.push(['Message', j.message]);
     state.details.replaceChildren(...rows.flatMap(([k, v]) => [h('dt', null, k), h('dd', null, v)]));
     state.cancel.hidden = ['done', 'failed', 'cancelled'].includes(j.state);
+    state.toggle.hidden = !j.denoise;
     if (j.checkpoint_iterations > 0 && j.checkpoint_iterations !== state.imagePasses) {
-      const blob = await (await api('/api/jobs/' + id + '/image.png', { raw: true })).blob();
-      const url = URL.createObjectURL(blob);
-      const old = state.img.getAttribute('src');
-      state.img.src = url;
-      state.img.dataset.passes = j.checkpoint_iterations;
-      if (old) URL.revokeObjectURL(old);
-      state.imagePasses = j.checkpoint_iterations;
-      state.imageBox.replaceChildren(state.img);
+      // The preview follows its checkpoint by the denoiser's time: shown at a later refresh.
+      const blob = await api('/api/jobs/' + id + '/' + state.view + '.png', { raw: true })
+        .then((r) => r.blob(), () => null);
+      if (blob) showImage(state, blob, j);
+      else state.imageBox.replaceChildren(h('span', { class: 'empty', id: 'no-preview' }, 'no denoised preview yet'));
     }
     state.chart.replaceChildren(chart(noise));
     if (j.frames && j.frames.length) await frameStrip(root, state, j);
@@ -214,6 +219,17 @@ const views = {
       h('div', { class: 'card' }, form, out));
   },
 };
+
+/** Shows a job's image (raw or denoised, as `state.view` says) from a PNG blob. */
+function showImage(state, blob, j) {
+  const old = state.img.getAttribute('src');
+  state.img.src = URL.createObjectURL(blob);
+  state.img.dataset.passes = j.checkpoint_iterations;
+  state.img.dataset.view = state.view;
+  if (old) URL.revokeObjectURL(old);
+  state.imagePasses = j.checkpoint_iterations;
+  state.imageBox.replaceChildren(state.img);
+}
 
 /** A sequence's frames as a strip of thumbnails, each with its state, linking to the frame's
  *  job; a thumbnail is fetched again only when its frame has a newer checkpoint. */
