@@ -7,12 +7,16 @@ ARG RUNTIME_IMAGE=debian:bookworm-slim
 FROM ${BUILD_IMAGE} AS build
 WORKDIR /src
 COPY . .
-RUN cargo build --release --locked -p coordinator -p worker
+# Open Image Denoise for `render --denoise` (deploy/install-oidn.sh: from PyPI, with Debian's
+# pip if the image lacks it); the coordinator finds it at /src/.oidn/lib, its run path.
+RUN deploy/install-oidn.sh \
+    && cargo build --release --locked -p coordinator --features denoise -p worker
 
 FROM ${RUNTIME_IMAGE}
 RUN useradd --system --create-home --home-dir /var/lib/photonfarm photonfarm \
     && mkdir -p /data && chown photonfarm /data
 COPY --from=build /src/target/release/coordinator /src/target/release/worker /usr/local/bin/
+COPY --from=build /src/.oidn/lib /src/.oidn/lib
 COPY --from=build /src/scenes /usr/share/photonfarm/scenes
 USER photonfarm
 EXPOSE 8080

@@ -5,7 +5,8 @@
 #   2. the Dockerfile's base images: Docker Hub's if the Hub answers, else local stand-ins
 #      (a debootstrap'ed bookworm for debian:bookworm-slim; that plus gcc and a Rust 1.95
 #      toolchain, the host's or rustup's, for rust:1.95-bookworm);
-#   3. `compose build`, a coordinator and two workers with PHOTONFARM_TOKEN set, /healthz;
+#   3. `compose build`; `render --denoise` in the image (OIDN loads); a coordinator and two
+#      workers with PHOTONFARM_TOKEN set, /healthz;
 #   4. a small SPPM job submitted from the host: its PNG must equal, byte for byte, a local
 #      `coordinator render` of the same scene and settings;
 #   5. a longer job while the workers are scaled to 3 (at 10%) and then to 1 (at 35%): same check;
@@ -254,6 +255,12 @@ step "3a. compose build"
 log "${DC[*]} build (log: $WORK/build.log)"
 "${DC[@]}" build >"$WORK/build.log" 2>&1 || { tail -30 "$WORK/build.log" >&2; die "compose build failed (see $WORK/build.log)"; }
 tail -3 "$WORK/build.log"
+
+step "3a'. denoising in the image (Open Image Denoise at the coordinator's run path)"
+docker run --rm photonfarm sh -c 'coordinator render /usr/share/photonfarm/scenes/cbox-spheres.xml \
+    -D res=32 --spp 4 --denoise --out /tmp/d.exr && test -s /tmp/d.denoised.exr' >"$WORK/denoise.log" 2>&1 ||
+    { tail -5 "$WORK/denoise.log" >&2; die "render --denoise failed in the image (see $WORK/denoise.log)"; }
+log "$(grep -m1 'denoised in' "$WORK/denoise.log")"
 
 step "3b. compose up: coordinator and 2 workers"
 FARM_UP=1
