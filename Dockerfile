@@ -16,7 +16,7 @@ FROM ${RUNTIME_IMAGE}
 RUN useradd --system --create-home --home-dir /var/lib/photonfarm photonfarm \
     && mkdir -p /data && chown photonfarm /data
 COPY --from=build /src/target/release/coordinator /src/target/release/worker /usr/local/bin/
-COPY --from=build /src/.oidn/lib /src/.oidn/lib
+COPY --from=build /src/.oidn /src/.oidn
 COPY --from=build /src/scenes /usr/share/photonfarm/scenes
 USER photonfarm
 EXPOSE 8080

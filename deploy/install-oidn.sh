@@ -8,7 +8,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 dest=.oidn/lib
 version=2.5.1
-if [ -e "$dest/libOpenImageDenoise.so" ] && [ -e "$dest/libOpenImageDenoise_core.so.$version" ]; then
+if [ -e "$dest/libOpenImageDenoise.so" ] && [ -e "$dest/libOpenImageDenoise_core.so.$version" ] &&
+    [ -e .oidn/NOTICE.txt ]; then
     exit 0
 fi
 if ! python3 -m pip --version >/dev/null 2>&1; then
@@ -21,12 +22,27 @@ echo "== Open Image Denoise $version from PyPI (pyoidn)"
 python3 -m pip download --quiet --no-deps --only-binary=:all: "pyoidn==$version.0" -d "$tmp"
 python3 -m zipfile -e "$tmp"/pyoidn-*.whl "$tmp/wheel"
 src="$tmp/wheel/pyoidn/oidn/lib"
-mkdir -p "$dest"
+# Staged, then moved into place: a running coordinator keeps the files it has mapped.
+staged="$tmp/lib"
+mkdir -p "$staged"
 for f in "libOpenImageDenoise.so.$version" "libOpenImageDenoise_core.so.$version" \
     "libOpenImageDenoise_device_cpu.so.$version" libtbb.so.12; do
-    cp "$src/$f" "$dest/"
+    cp "$src/$f" "$staged/"
 done
 # The libraries find each other through $ORIGIN/../lib: the folder must be called lib.
-ln -sf "libOpenImageDenoise.so.$version" "$dest/libOpenImageDenoise.so.2"
-ln -sf libOpenImageDenoise.so.2 "$dest/libOpenImageDenoise.so"
+ln -sf "libOpenImageDenoise.so.$version" "$staged/libOpenImageDenoise.so.2"
+ln -sf libOpenImageDenoise.so.2 "$staged/libOpenImageDenoise.so"
+mkdir -p .oidn
+rm -rf .oidn/lib.old
+if [ -e "$dest" ]; then mv "$dest" .oidn/lib.old; fi
+mv "$staged" "$dest"
+rm -rf .oidn/lib.old
+# Both are Apache-2.0 and the wheel carries no license text: Debian's copy of the license
+# (base-files) and a notice go beside the libraries, and into the Docker image with them.
+cp /usr/share/common-licenses/Apache-2.0 .oidn/LICENSE-Apache-2.0.txt
+cat >.oidn/NOTICE.txt <<NOTICE
+lib/ holds Intel Open Image Denoise $version (libOpenImageDenoise*, https://www.openimagedenoise.org)
+and Intel oneAPI Threading Building Blocks (libtbb), both under the Apache License 2.0
+(LICENSE-Apache-2.0.txt), as built by Intel and shipped in the PyPI wheel pyoidn==$version.0.
+NOTICE
 echo "installed in $dest"
