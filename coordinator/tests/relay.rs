@@ -1,7 +1,7 @@
 //! The relay as users run it: a real coordinator, a real `coordinator relay` in front of two
 //! real workers, real HTTP. The farm's image through the relay must be the bytes of
 //! `coordinator render` with the same job and seed, and the noise estimate must follow (the
-//! relay sums its workers' odd passes too).
+//! relay sums its workers' odd passes, and their features, too).
 
 mod support;
 
@@ -12,8 +12,10 @@ use serde_json::Value;
 use support::{Proc, announced, cbox_spheres as scene, coordinator_bin, worker};
 
 /// SPPM (so the relay must hand each worker its passes' radii) with a Gaussian filter (so
-/// pixel weights are merged too); small enough for CI.
+/// pixel weights are merged too) and the denoiser's features (so the relay sums its workers'
+/// features, and the EXR compared carries them as channels); small enough for CI.
 const JOB: &[&str] = &[
+    "--aovs",
     "--integrator",
     "sppm",
     "--iterations",
