@@ -315,6 +315,19 @@ fn render_image(
             save_features(f)?;
         }
     }
+    if settings
+        .checkpoint_every
+        .is_some_and(|n| film.passes.is_multiple_of(n))
+    {
+        // The last checkpoint is the final image.
+        let _ = std::fs::copy(out, checkpoint_path(out, film.passes));
+    }
+    eprintln!(
+        "wrote {} ({} {unit} in {:.1} s)",
+        out.display(),
+        film.passes,
+        start.elapsed().as_secs_f64()
+    );
     if settings.denoise
         && let Some(f) = features
     {
@@ -330,19 +343,6 @@ fn render_image(
             t.elapsed().as_secs_f64()
         );
     }
-    if settings
-        .checkpoint_every
-        .is_some_and(|n| film.passes.is_multiple_of(n))
-    {
-        // The last checkpoint is the final image.
-        let _ = std::fs::copy(out, checkpoint_path(out, film.passes));
-    }
-    eprintln!(
-        "wrote {} ({} {unit} in {:.1} s)",
-        out.display(),
-        film.passes,
-        start.elapsed().as_secs_f64()
-    );
     if interrupted.load(Ordering::Relaxed) {
         let of = resolved.passes.map(|n| format!(" of {n}")).unwrap_or_default();
         bail!(
