@@ -26,7 +26,7 @@ use std::path::Path;
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::film::{FilmError, FilmSum, write_image};
+use crate::film::{FilmError, FilmSum, is_exr, write_image};
 use crate::geometry::Ray;
 use crate::integrator::walk::{Event, Walk};
 use crate::sampling::Sampler;
@@ -107,9 +107,8 @@ pub fn write_image_with_features(
     features: Option<&Features>,
     path: &Path,
 ) -> Result<(), FilmError> {
-    let exr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     match features {
-        Some(f) if exr => write_exr_with_features(image, f, path),
+        Some(f) if is_exr(path) => write_exr_with_features(image, f, path),
         _ => write_image(image, width, height, path),
     }
 }
@@ -159,60 +158,78 @@ pub(crate) struct Sample {
     pub emitted: Rgb,
 }
 
-/// The features' sample of one camera ray; `sampler` goes on from the camera sample.
-pub(crate) fn sample(scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Sample {
-    let (albedo, normal, first) = first_surface(scene, ray, sampler);
-    Sample {
-        albedo,
-        normal,
-        emitted: first.unwrap_or(Rgb::ZERO),
-    }
+impl Sample {
+    /// What a ray that finds nothing gives.
+    const NONE: Sample = Sample {
+        albedo: Rgb::ZERO,
+        normal: Rgb::splat(0.5),
+        emitted: Rgb::ZERO,
+    };
 }
 
-/// (albedo, encoded normal, the emission the camera ray finds with full throughput, if any).
-fn first_surface(scene: &Scene, ray: Ray, sampler: &mut Sampler) -> (Rgb, Rgb, Option<Rgb>) {
-    let none = (Rgb::ZERO, Rgb::splat(0.5), None);
+/// The features' sample of one camera ray; `sampler` goes on from the camera sample.
+pub(crate) fn sample(scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Sample {
     // The emission an integrator adds along the camera ray as it is: found before any bounce
     // or medium changed the throughput.
-    let direct = |walk: &Walk, le: Rgb| (walk.depth == 0 && walk.beta == Rgb::ONE).then_some(le);
+    let direct = |walk: &Walk, le: Rgb| {
+        if walk.depth == 0 && walk.beta == Rgb::ONE {
+            le
+        } else {
+            Rgb::ZERO
+        }
+    };
     let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
     for _ in 0..=MAX_SPECULAR_BOUNCES {
         match walk.next_event(scene, sampler) {
             // An environment seen: its radiance, clamped, marks it apart from the surfaces.
             Event::Gone => {
                 let le = walk.escaped(scene);
-                return if le == Rgb::ZERO {
-                    none
-                } else {
-                    (clamp01(le), Rgb::splat(0.5), direct(&walk, le))
+                return Sample {
+                    albedo: clamp01(le),
+                    emitted: direct(&walk, le),
+                    ..Sample::NONE
                 };
             }
             // Fog: the medium's albedo, and the normal of a surface facing the ray.
             Event::Medium { medium, .. } => {
-                let albedo = walk.beta * scene.media[medium as usize].albedo;
-                return (clamp01(albedo), encode(-walk.ray.d), None);
+                return Sample {
+                    albedo: clamp01(walk.beta * scene.media[medium as usize].albedo),
+                    normal: encode(-walk.ray.d),
+                    ..Sample::NONE
+                };
             }
             Event::Surface(hit) => {
                 let n = hit.frame.n;
-                let facing = if n.dot(hit.wo) < 0.0 { -n } else { n };
+                let normal = encode(if n.dot(hit.wo) < 0.0 { -n } else { n });
                 // An emitter's albedo is its radiance, clamped (as Yocto's and others' are): its
                 // outline then stands out from the surface it sits in, which a denoiser keeps
                 // sharp.
                 let le = walk.emission(scene, &hit);
                 if le != Rgb::ZERO {
-                    return (clamp01(le), encode(facing), direct(&walk, le));
+                    return Sample {
+                        albedo: clamp01(le),
+                        normal,
+                        emitted: direct(&walk, le),
+                    };
                 }
                 let Some(bs) = Walk::sample_bsdf(&hit, sampler, TransportMode::Radiance) else {
-                    return (Rgb::ZERO, encode(facing), None);
+                    return Sample {
+                        normal,
+                        ..Sample::NONE
+                    };
                 };
                 if hit.bsdf.has_smooth() {
-                    return (clamp01(walk.beta * bs.weight), encode(facing), None);
+                    return Sample {
+                        albedo: clamp01(walk.beta * bs.weight),
+                        normal,
+                        ..Sample::NONE
+                    };
                 }
                 walk.follow(&hit, &bs);
             }
         }
     }
-    none
+    Sample::NONE
 }
 
 fn clamp01(c: Rgb) -> Rgb {

@@ -212,6 +212,22 @@ pub fn write_image(pixels: &[Rgb], width: u32, height: u32, path: &Path) -> Resu
     }
 }
 
+/// Whether `path` names an EXR file (by its extension, as [`write_image`] decides).
+pub fn is_exr(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
+/// `out` with `insert` before its extension, beside it: the names of the files that go with
+/// an output (`x.exr` → `x-000256.exr`, `x.denoised.exr`, `x0007.exr`).
+pub fn beside(out: &Path, insert: &str) -> std::path::PathBuf {
+    let stem = out.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
+    let name = match out.extension() {
+        Some(ext) => format!("{stem}{insert}.{}", ext.to_string_lossy()),
+        None => format!("{stem}{insert}"),
+    };
+    out.with_file_name(name)
+}
+
 /// Reads an image (EXR or PNG) as linear RGB, for comparisons against references.
 pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<Rgb>), image::ImageError> {
     let img = image::open(path)?.into_rgb32f();

@@ -158,7 +158,10 @@ pub fn frame_path(out: &Path, frame: u32) -> PathBuf {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let name = if name.contains('#') {
+    if !name.contains('#') {
+        return crate::film::beside(out, &format!("{frame:04}"));
+    }
+    let name = {
         let mut s = String::with_capacity(name.len() + 8);
         let mut chars = name.chars().peekable();
         while let Some(c) = chars.next() {
@@ -174,13 +177,6 @@ pub fn frame_path(out: &Path, frame: u32) -> PathBuf {
             }
         }
         s
-    } else {
-        let path = Path::new(&name);
-        let stem = path.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
-        match path.extension() {
-            Some(ext) => format!("{stem}{frame:04}.{}", ext.to_string_lossy()),
-            None => format!("{stem}{frame:04}"),
-        }
     };
     out.with_file_name(name)
 }

@@ -62,6 +62,16 @@ impl OddSums {
         }
     }
 
+    /// A result's odd passes' sample: as sent, or, for a one-pass result of pass `start` sent
+    /// without it (an older worker), known from the pass's parity.
+    pub fn sent_or_known(odd: Option<OddSums>, start: u64, sum: &FilmSum) -> Option<OddSums> {
+        odd.or_else(|| match sum.passes {
+            1 if start % 2 == 1 => Some(OddSums::of(sum)),
+            1 => Some(OddSums::empty(sum.width, sum.height)),
+            _ => None,
+        })
+    }
+
     /// The sampled pixels of `film`, every pass of which is odd.
     pub fn of(film: &FilmSum) -> OddSums {
         let idx = || sample_indices(film.width, film.height);

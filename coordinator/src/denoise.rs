@@ -86,7 +86,5 @@ fn run_filter(_: &[f32], _: &[f32], _: &[f32], _: usize, _: usize) -> anyhow::Re
 
 /// Where the denoised preview of `out` goes: `x.exr` → `x.denoised.exr`, beside it.
 pub fn denoised_path(out: &std::path::Path) -> std::path::PathBuf {
-    let stem = out.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
-    let ext = out.extension().map(|s| s.to_string_lossy()).unwrap_or_default();
-    out.with_file_name(format!("{stem}.denoised.{ext}"))
+    photonfarm::film::beside(out, ".denoised")
 }

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use photonfarm::features::{Features, write_image_with_features};
-use photonfarm::film::{FilmSum, write_image};
+use photonfarm::film::{FilmSum, is_exr, write_image};
 use photonfarm::frames::{frame_path, parse_frames};
 use photonfarm::job::JobSettings;
 use photonfarm::render::{Method, Renderer};
@@ -381,14 +381,7 @@ fn interruption_flag() -> Arc<AtomicBool> {
 
 /// `out.exr` → `out-000256.exr`, beside it.
 pub fn checkpoint_path(out: &Path, count: u64) -> PathBuf {
-    let stem = out.file_stem().map(|s| s.to_string_lossy()).unwrap_or_default();
-    let ext = out.extension().map(|s| s.to_string_lossy()).unwrap_or_default();
-    out.with_file_name(format!("{stem}-{count:06}.{ext}"))
-}
-
-/// Whether `out` names an EXR file.
-fn is_exr(out: &Path) -> bool {
-    out.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    photonfarm::film::beside(out, &format!("-{count:06}"))
 }
 
 /// Fails early on an output the render could not write.

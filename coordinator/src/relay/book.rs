@@ -77,11 +77,7 @@ impl BatchSum {
         odd: Option<OddSums>,
         features: Option<Features>,
     ) -> Result<bool, photonfarm::film::FilmError> {
-        let odd = odd.or_else(|| match sum.passes {
-            1 if start % 2 == 1 => Some(OddSums::of(&sum)),
-            1 => Some(OddSums::empty(sum.width, sum.height)),
-            _ => None,
-        });
+        let odd = OddSums::sent_or_known(odd, start, &sum);
         let passes = sum.passes;
         match &mut self.sum {
             None => self.sum = Some(sum),

@@ -178,11 +178,7 @@ impl Accumulator {
             // passes not yet stored; this guards the invariant.
             return Ok(merged);
         }
-        let odd = odd.or_else(|| match sum.passes {
-            1 if start % 2 == 1 => Some(OddSums::of(&sum)),
-            1 => Some(OddSums::empty(sum.width, sum.height)),
-            _ => None,
-        });
+        let odd = OddSums::sent_or_known(odd, start, &sum);
         let end = start + sum.passes;
         match self.pending.entry(start / self.checkpoint_every) {
             std::collections::btree_map::Entry::Vacant(v) => {
