@@ -26,7 +26,7 @@ use std::path::Path;
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
-use crate::film::{FilmError, FilmSum, is_exr, write_image};
+use crate::film::{FilmError, FilmSum, is_exr, write_exr_layers, write_image};
 use crate::geometry::Ray;
 use crate::integrator::walk::{Event, Walk};
 use crate::sampling::Sampler;
@@ -113,40 +113,17 @@ pub fn write_image_with_features(
     }
 }
 
-/// Writes `image` and its features as one EXR: the image as channels R, G and B (what every
-/// viewer shows), the features as `albedo.R` … `normal.B`, the channel names Mitsuba's `aov`
-/// integrator and Blender give their passes.
+/// Writes `image` and its features as one EXR: the image as channels R, G and B, the
+/// features as `albedo.R` … `normal.B` ([`write_exr_layers`]).
 pub fn write_exr_with_features(image: &[Rgb], features: &Features, path: &Path) -> Result<(), FilmError> {
-    use exr::prelude::*;
-    let (w, h) = (features.albedo.width as usize, features.albedo.height as usize);
-    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
-    let mut add = |prefix: &str, pixels: &[Rgb]| {
-        for (c, name) in ["R", "G", "B"].iter().enumerate() {
-            let values = pixels.iter().map(|p| p[c]).collect();
-            channels.push(AnyChannel::new(
-                format!("{prefix}{name}").as_str(),
-                FlatSamples::F32(values),
-            ));
-        }
-    };
-    add("", image);
-    add("albedo.", &features.albedo_image()?);
-    add("normal.", &features.normal_image()?);
-    let layer = Layer::new(
-        (w, h),
-        LayerAttributes::default(),
-        // Chunks in increasing order: the crate compresses them in parallel and, unsorted,
-        // writes them as they finish, so the same image gave other bytes from run to run.
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(channels),
-    );
-    Image::from_layer(layer)
-        .write()
-        .to_file(path)
-        .map_err(|source| FilmError::WriteLayers {
-            path: path.display().to_string(),
-            source,
-        })
+    let (w, h) = (features.albedo.width, features.albedo.height);
+    let (albedo, normal) = (features.albedo_image()?, features.normal_image()?);
+    write_exr_layers(
+        w,
+        h,
+        &[("", image), ("albedo.", &albedo), ("normal.", &normal)],
+        path,
+    )
 }
 
 /// One camera ray's sample of each feature.

@@ -193,10 +193,10 @@ pub fn write_image(pixels: &[Rgb], width: u32, height: u32, path: &Path) -> Resu
     };
     match ext.as_str() {
         "exr" => {
-            let data: Vec<f32> = pixels.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-            let img = image::Rgb32FImage::from_raw(width, height, data).ok_or(FilmError::Empty)?;
-            img.save_with_format(path, image::ImageFormat::OpenExr)
-                .map_err(write_err)
+            if pixels.len() != width as usize * height as usize {
+                return Err(FilmError::Empty);
+            }
+            write_exr_layers(width, height, &[("", pixels)], path)
         }
         "png" => {
             let to8 = |v: f32| (srgb_encode(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8;
@@ -210,6 +210,47 @@ pub fn write_image(pixels: &[Rgb], width: u32, height: u32, path: &Path) -> Resu
         }
         other => Err(FilmError::Format(other.to_string())),
     }
+}
+
+/// Writes an EXR of 32-bit float RGB layers: `(prefix, pixels)` becomes channels `{prefix}R`,
+/// `{prefix}G` and `{prefix}B` (the image as `R`, `G`, `B`, what every viewer shows; features as
+/// `albedo.R` …, the names Mitsuba's `aov` integrator and Blender give their passes).
+///
+/// Why not the image crate's EXR encoder: it writes tiles as its threads finish them, so the
+/// same pixels gave other bytes from run to run (six runs of one render, five different files),
+/// and the farm promises the same bytes. Chunks here go in increasing order.
+pub fn write_exr_layers(
+    width: u32,
+    height: u32,
+    layers: &[(&str, &[Rgb])],
+    path: &Path,
+) -> Result<(), FilmError> {
+    use exr::prelude::*;
+    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    for (prefix, pixels) in layers {
+        for (c, name) in ["R", "G", "B"].iter().enumerate() {
+            let values = pixels.iter().map(|p| p[c]).collect();
+            channels.push(AnyChannel::new(
+                format!("{prefix}{name}").as_str(),
+                FlatSamples::F32(values),
+            ));
+        }
+    }
+    let layer = Layer::new(
+        (width as usize, height as usize),
+        LayerAttributes::default(),
+        // Lossless, and in increasing order (`Encoding::SMALL_LOSSLESS`'s line order): the crate
+        // compresses chunks in parallel but writes them sorted.
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|source| FilmError::WriteLayers {
+            path: path.display().to_string(),
+            source,
+        })
 }
 
 /// Whether `path` names an EXR file (by its extension, as [`write_image`] decides).
@@ -239,6 +280,27 @@ pub fn read_image(path: &Path) -> Result<(u32, u32, Vec<Rgb>), image::ImageError
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The same pixels give the same EXR every time, and read back as written. (Through the
+    /// image crate's encoder, six runs of one render gave five different files.)
+    #[test]
+    fn an_exr_has_the_same_bytes_every_time() {
+        let (w, h) = (320u32, 200u32);
+        let image: Vec<Rgb> = (0..w * h)
+            .map(|i| Rgb::new((i % 7) as f32, (i % 13) as f32 * 0.1, (i % 101) as f32 * 0.37))
+            .collect();
+        let dir = tempfile::tempdir().unwrap();
+        let bytes: Vec<Vec<u8>> = (0..12)
+            .map(|k| {
+                let path = dir.path().join(format!("{k}.exr"));
+                write_image(&image, w, h, &path).unwrap();
+                std::fs::read(&path).unwrap()
+            })
+            .collect();
+        assert!(bytes.windows(2).all(|p| p[0] == p[1]));
+        let (rw, rh, back) = read_image(&dir.path().join("0.exr")).unwrap();
+        assert_eq!((rw, rh, back), (w, h, image));
+    }
 
     #[test]
     fn adding_is_exact_in_any_order() {
