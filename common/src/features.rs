@@ -21,16 +21,28 @@
 //! the pixel along the same ray, with no noise. The denoiser is given the image without it and
 //! it is added back after, so that lights keep their exact values and outlines (OIDN moved a
 //! directly seen light's pixels by 3%, which alone made cbox's RMSE three times the raw one's).
+//!
+//! What is added back is a fourth sum, `emitted_dense`: the same emission, from
+//! [`DENSE_SAMPLES`] more camera rays per pixel and pass, all points of one low-discrepancy
+//! sequence across passes. Where a light covers a pixel in part, the image's own rays give that
+//! coverage with the noise of one sample a pass; it was 91% of the denoised error left on cbox
+//! (docs/denoising.md). These rays only look for emission at their first hit, so they cost
+//! less than the path's, and only in scenes whose lights or environment can be seen.
 
 use std::path::Path;
 
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
+use crate::engine::lanes::{F8, LANES, M8, V8};
 use crate::film::{FilmError, FilmSum, is_exr, write_exr_layers, write_image};
-use crate::geometry::Ray;
+use crate::geometry::{Ray, Rays8};
 use crate::integrator::walk::{Event, Walk};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
+
+/// Camera rays per pixel and pass for [`Features::emitted_dense`] (docs/denoising.md has the
+/// measurements behind four).
+pub const DENSE_SAMPLES: u32 = 4;
 
 /// Specular bounces a feature walk follows before it gives up (a ray caught between two
 /// mirrors): past it the pixel's features are zero, as for a ray that leaves the scene.
@@ -43,8 +55,10 @@ pub struct Features {
     pub albedo: FilmSum,
     /// Normals encoded as (n + 1) / 2.
     pub normal: FilmSum,
-    /// Emission seen directly by the camera ray.
+    /// Emission seen directly by the image's own camera ray: what the denoiser is not given.
     pub emitted: FilmSum,
+    /// The same emission from [`DENSE_SAMPLES`] rays a pass: what is added back after.
+    pub emitted_dense: FilmSum,
 }
 
 impl Features {
@@ -54,31 +68,44 @@ impl Features {
             albedo: FilmSum::new(width, height),
             normal: FilmSum::new(width, height),
             emitted: FilmSum::new(width, height),
+            emitted_dense: FilmSum::new(width, height),
         }
     }
 
     /// The names of the sums, in the order of [`Features::sums`].
-    pub const NAMES: [&str; 3] = ["albedo", "normal", "emitted"];
+    pub const NAMES: [&str; 4] = ["albedo", "normal", "emitted", "emitted_dense"];
 
     /// The sums, named by [`Features::NAMES`] (for files and messages that hold them apart).
-    pub fn sums(&self) -> [&FilmSum; 3] {
-        [&self.albedo, &self.normal, &self.emitted]
+    pub fn sums(&self) -> [&FilmSum; 4] {
+        [&self.albedo, &self.normal, &self.emitted, &self.emitted_dense]
+    }
+
+    /// The sums, mutable, in the order of [`Features::NAMES`].
+    pub fn sums_mut(&mut self) -> [&mut FilmSum; 4] {
+        [
+            &mut self.albedo,
+            &mut self.normal,
+            &mut self.emitted,
+            &mut self.emitted_dense,
+        ]
     }
 
     /// Features from their sums, in the order of [`Features::NAMES`].
-    pub fn from_sums([albedo, normal, emitted]: [FilmSum; 3]) -> Features {
+    pub fn from_sums([albedo, normal, emitted, emitted_dense]: [FilmSum; 4]) -> Features {
         Features {
             albedo,
             normal,
             emitted,
+            emitted_dense,
         }
     }
 
     /// Adds another range's features: exact, in any order.
     pub fn add(&mut self, other: &Features) -> Result<(), FilmError> {
-        self.albedo.add(&other.albedo)?;
-        self.normal.add(&other.normal)?;
-        self.emitted.add(&other.emitted)
+        for (mine, theirs) in self.sums_mut().into_iter().zip(other.sums()) {
+            mine.add(theirs)?;
+        }
+        Ok(())
     }
 
     /// The mean albedo per pixel.
@@ -144,17 +171,74 @@ impl Sample {
     };
 }
 
+/// The emission an integrator adds along the camera ray as it is: found before any bounce
+/// or medium changed the throughput.
+fn direct(walk: &Walk, le: Rgb) -> Rgb {
+    if walk.depth == 0 && walk.beta == Rgb::ONE {
+        le
+    } else {
+        Rgb::ZERO
+    }
+}
+
+/// The emission camera ray `ray` finds directly: a [`Sample`]'s `emitted`, without the rest
+/// of the walk (for [`Features::emitted_dense`]).
+pub(crate) fn direct_emission(scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Rgb {
+    let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
+    match walk.next_event(scene, sampler) {
+        Event::Gone => direct(&walk, walk.escaped(scene)),
+        Event::Medium { .. } => Rgb::ZERO,
+        Event::Surface(hit) => direct(&walk, walk.emission(scene, &hit)),
+    }
+}
+
+/// [`direct_emission`] of up to [`LANES`] camera rays, traced as one packet (camera rays are
+/// coherent: a packet costs less than its rays one by one). Only a lane that meets a light, a
+/// medium boundary or an instance, or a scene whose camera sits in a medium, takes the walk:
+/// every other lane's answer (nothing, or the environment) is what the walk would give.
+#[inline(always)]
+pub(crate) fn direct_emission8(scene: &Scene, rays: &[Ray], samplers: &mut [Sampler]) -> [Rgb; LANES] {
+    let mut out = [Rgb::ZERO; LANES];
+    if scene.camera_medium.is_some() {
+        for ((o, ray), sampler) in out.iter_mut().zip(rays).zip(samplers) {
+            *o = direct_emission(scene, *ray, sampler);
+        }
+        return out;
+    }
+    let lane = |i: usize, f: fn(&Ray) -> glam::Vec3A, c: usize| rays.get(i).map_or(0.0, |r| f(r)[c]);
+    let v8 = |f: fn(&Ray) -> glam::Vec3A| V8 {
+        x: F8::from_fn(|i| lane(i, f, 0)),
+        y: F8::from_fn(|i| lane(i, f, 1)),
+        z: F8::from_fn(|i| lane(i, f, 2)),
+    };
+    let hits = scene.bvh.intersect8(&Rays8 {
+        o: v8(|r| r.o),
+        d: v8(|r| r.d),
+        t_max: F8::splat(f32::INFINITY),
+        active: M8::from_fn(|i| i < rays.len()),
+    });
+    for (i, (ray, sampler)) in rays.iter().zip(samplers).enumerate() {
+        out[i] = match hits.hit(i) {
+            None => Walk::new(*ray, Rgb::ONE, None).escaped(scene),
+            Some(h) => {
+                let shape = scene.bvh.primitives()[h.prim as usize].shape();
+                let plain = scene
+                    .shapes
+                    .get(shape as usize)
+                    .is_some_and(|s| s.light.is_none() && !scene.bsdfs[s.bsdf as usize].is_null());
+                if plain {
+                    Rgb::ZERO
+                } else {
+                    direct_emission(scene, *ray, sampler)
+                }
+            }
+        };
+    }
+    out
+}
+
 /// The features' sample of one camera ray; `sampler` goes on from the camera sample.
 pub(crate) fn sample(scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Sample {
-    // The emission an integrator adds along the camera ray as it is: found before any bounce
-    // or medium changed the throughput.
-    let direct = |walk: &Walk, le: Rgb| {
-        if walk.depth == 0 && walk.beta == Rgb::ONE {
-            le
-        } else {
-            Rgb::ZERO
-        }
-    };
     let mut walk = Walk::new(ray, Rgb::ONE, scene.camera_medium);
     for _ in 0..=MAX_SPECULAR_BOUNCES {
         match walk.next_event(scene, sampler) {
@@ -235,7 +319,7 @@ mod tests {
             .map(|i| Rgb::new((i % 7) as f32, (i % 13) as f32 * 0.1, (i % 101) as f32 * 0.37))
             .collect();
         let mut features = Features::new(w, h);
-        for s in [&mut features.albedo, &mut features.normal, &mut features.emitted] {
+        for s in features.sums_mut() {
             s.passes = 1;
             for (i, p) in s.sums.iter_mut().enumerate() {
                 *p = [(i * 31 % 1000) as i64, (i * 17 % 500) as i64, i as i64];

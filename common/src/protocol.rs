@@ -230,12 +230,16 @@ pub fn max_encoded_batch(width: u32, height: u32, features: bool) -> u64 {
     // than a box, one weight.
     let sum = 2 * 5 + 4 * 9 + width as u64 * height as u64 * 40;
     // The odd passes' sample (see [`crate::parity`]) adds its lengths, its pass count and at
-    // most 40 bytes per sampled pixel; the features are three more sums.
+    // most 40 bytes per sampled pixel; the features are four more sums.
     MAGIC.len() as u64
         + sum
         + 3 * 9
         + sample_len(width, height) as u64 * 40
-        + if features { 3 * sum } else { 0 }
+        + if features {
+            Features::NAMES.len() as u64 * sum
+        } else {
+            0
+        }
 }
 
 /// The coordinator's answer to a heartbeat.
@@ -267,8 +271,12 @@ pub enum CodecError {
 const MAGIC: &[u8; 8] = b"PFBATCH1";
 /// A result with its odd passes' sample: [`encode_result`].
 const MAGIC_WITH_ODD: &[u8; 8] = b"PFBATCH2";
-/// A result with its odd passes' sample and the denoiser's features: [`encode_result`].
-const MAGIC_WITH_FEATURES: &[u8; 8] = b"PFBATCH3";
+/// A result with its odd passes' sample and the denoiser's four features: [`encode_result`].
+const MAGIC_WITH_FEATURES: &[u8; 8] = b"PFBATCH4";
+/// As [`MAGIC_WITH_FEATURES`], from before `emitted_dense`: three features. Still read, so that
+/// a coordinator upgraded mid-job keeps its stored batches; `emitted` then stands for
+/// `emitted_dense` too (the same mean, from the image's own rays).
+const MAGIC_WITH_THREE_FEATURES: &[u8; 8] = b"PFBATCH3";
 
 /// A batch's result: its exact sum and, from workers that send it, the sums of its odd passes
 /// on the sampled pixels (for the noise estimate; see [`crate::parity`]).
@@ -283,15 +291,15 @@ pub struct BatchResult {
 }
 
 /// Encodes a result with its odd passes' sample (`PFBATCH2`): the full sum is encoded exactly
-/// as by [`encode_batch`], followed by the sample; with features (`PFBATCH3`), followed by
-/// their three sums.
+/// as by [`encode_batch`], followed by the sample; with features (`PFBATCH4`), followed by
+/// their four sums.
 pub fn encode_result(sum: &FilmSum, odd: &OddSums, features: Option<&Features>) -> Vec<u8> {
     let config = bincode::config::standard();
     let (magic, body) = match features {
         None => (MAGIC_WITH_ODD, bincode::serde::encode_to_vec((sum, odd), config)),
         Some(f) => {
-            let [albedo, normal, emitted] = f.sums();
-            let all = (sum, odd, albedo, normal, emitted);
+            let [albedo, normal, emitted, emitted_dense] = f.sums();
+            let all = (sum, odd, albedo, normal, emitted, emitted_dense);
             (MAGIC_WITH_FEATURES, bincode::serde::encode_to_vec(all, config))
         }
     };
@@ -305,13 +313,13 @@ pub fn encode_result(sum: &FilmSum, odd: &OddSums, features: Option<&Features>) 
 /// receiver's (a lease's, a job's): a result of another size, or one whose vectors claim more
 /// pixels, is refused before anything is allocated for it (see [`bounded`]).
 pub fn decode_result(bytes: &[u8], width: u32, height: u32) -> Result<BatchResult, CodecError> {
-    let (body, features) = match (
-        bytes.strip_prefix(MAGIC_WITH_ODD.as_slice()),
-        bytes.strip_prefix(MAGIC_WITH_FEATURES.as_slice()),
-    ) {
-        (Some(body), _) => (body, false),
-        (_, Some(body)) => (body, true),
-        _ => {
+    let (body, features) = match [MAGIC_WITH_ODD, MAGIC_WITH_THREE_FEATURES, MAGIC_WITH_FEATURES]
+        .iter()
+        .zip([0, 3, Features::NAMES.len()])
+        .find_map(|(magic, n)| Some((bytes.strip_prefix(magic.as_slice())?, n)))
+    {
+        Some(found) => found,
+        None => {
             return decode_batch(bytes, width, height).map(|sum| BatchResult {
                 sum,
                 odd: None,
@@ -328,7 +336,8 @@ pub fn decode_result(bytes: &[u8], width: u32, height: u32) -> Result<BatchResul
     odd.check(sum.width, sum.height, sum.passes)
         .map_err(CodecError::Invalid)?;
     let features = match features {
-        Some(sums) => {
+        sums if sums.is_empty() => None,
+        mut sums => {
             for f in &sums {
                 check_sum(f)?;
                 if f.passes != sum.passes {
@@ -338,9 +347,11 @@ pub fn decode_result(bytes: &[u8], width: u32, height: u32) -> Result<BatchResul
                     )));
                 }
             }
-            Some(Features::from_sums(sums))
+            if sums.len() == 3 {
+                sums.push(sums[2].clone());
+            }
+            Some(Features::from_sums(sums.try_into().expect("one sum per name")))
         }
-        None => None,
     };
     Ok(BatchResult {
         sum,
@@ -433,7 +444,7 @@ mod tests {
             passes: u64::MAX,
         };
         assert!(encode_result(&worst, &odd_worst, None).len() as u64 <= max_encoded_batch(3, 2, false));
-        let features = Features::from_sums([worst.clone(), worst.clone(), worst.clone()]);
+        let features = Features::from_sums(std::array::from_fn(|_| worst.clone()));
         let with = encode_result(&worst, &odd_worst, Some(&features));
         assert!(with.len() as u64 <= max_encoded_batch(3, 2, true));
         assert!(with.len() as u64 > max_encoded_batch(3, 2, false));
@@ -467,10 +478,7 @@ mod tests {
         f.passes = 2;
         let odd = OddSums::empty(3, 2);
         let mut features = Features::new(3, 2);
-        for (k, s) in [&mut features.albedo, &mut features.normal, &mut features.emitted]
-            .into_iter()
-            .enumerate()
-        {
+        for (k, s) in features.sums_mut().into_iter().enumerate() {
             s.sums[k] = [k as i64 + 1; 3];
             s.passes = 2;
         }
@@ -483,6 +491,27 @@ mod tests {
         assert!(e.to_string().contains("features of 3 passes"), "{e}");
         let other = Features::new(2, 3);
         assert!(decode_result(&encode_result(&f, &odd, Some(&other)), 3, 2).is_err());
+    }
+
+    /// A `PFBATCH3` result, from before the dense emission (a batch stored by an older
+    /// coordinator), still reads: its own emission stands for the dense one.
+    #[test]
+    fn results_with_three_features_still_decode() {
+        let mut f = FilmSum::new(3, 2);
+        f.sums[1] = [5, 6, 7];
+        f.passes = 2;
+        let odd = OddSums::empty(3, 2);
+        let mut three: Vec<FilmSum> = (0..3).map(|_| f.clone()).collect();
+        three[2].sums[0] = [9, 9, 9];
+        let body = (&f, &odd, &three[0], &three[1], &three[2]);
+        let mut bytes = MAGIC_WITH_THREE_FEATURES.to_vec();
+        bytes.extend(bincode::serde::encode_to_vec(body, bincode::config::standard()).unwrap());
+        let r = decode_result(&bytes, 3, 2).unwrap().features.unwrap();
+        assert_eq!(r.emitted, three[2]);
+        assert_eq!(r.emitted_dense, three[2]);
+        // And with a fourth sum after it, the three-feature kind has trailing bytes.
+        bytes.extend(bincode::serde::encode_to_vec(&f, bincode::config::standard()).unwrap());
+        assert!(decode_result(&bytes, 3, 2).is_err());
     }
 
     #[test]

@@ -13,6 +13,7 @@ use glam::{Vec2, Vec3A};
 use crate::color::Rgb;
 use crate::engine::Backend;
 use crate::engine::diffuse_path::{self, DiffuseScene};
+use crate::engine::lanes::LANES;
 use crate::features::{self, Features};
 use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
@@ -310,16 +311,38 @@ fn add_pixel_samples(
 /// Adds one sample per pixel, `sample(x, y)` giving its value and its offset within the pixel,
 /// through the scene's filter; counts one pass.
 fn add_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32) -> (Rgb, Vec2) + Sync) {
-    if scene.filter.is_box() {
-        add_box_samples(scene, film, sample);
-    } else {
-        splat::add_filtered_samples(scene, film, sample);
+    add_sample_sets(scene, film, 1, |_| &sample);
+}
+
+/// Adds `count` samples per pixel as one pass, `set(j)` giving the j-th sample of every pixel:
+/// each through the filter at its own film position, so the pass's mean is theirs.
+fn add_sample_sets<S: Fn(u32, u32) -> (Rgb, Vec2) + Sync>(
+    scene: &Scene,
+    film: &mut FilmSum,
+    count: u32,
+    set: impl Fn(u32) -> S,
+) {
+    for j in 0..count {
+        let sample = set(j);
+        if scene.filter.is_box() {
+            // A box film divides by passes: each of the pass's samples weighs 1/count (exact
+            // for a power of two).
+            let weight = 1.0 / count as f32;
+            add_box_samples(scene, film, |x, y| {
+                let (v, u) = sample(x, y);
+                (v * weight, u)
+            });
+        } else {
+            // A filtered film divides by the filter weights it sums.
+            splat::add_filtered_samples(scene, film, sample);
+        }
     }
     film.passes += 1;
 }
 
 /// Adds pass `pass`'s features: one walk per pixel from the pass's camera sample, then the
-/// albedo and the normal through the filter at the sample's film position, as the image's.
+/// albedo and the normal through the filter at the sample's film position, as the image's;
+/// then the dense emission's own rays.
 fn add_feature_pass(scene: &Scene, seed: u64, pass: u64, out: &mut Features) {
     let w = scene.width();
     let pixels = w as usize * scene.height() as usize;
@@ -335,6 +358,72 @@ fn add_feature_pass(scene: &Scene, seed: u64, pass: u64, out: &mut Features) {
     add_samples(scene, &mut out.albedo, |x, y| (at(x, y).0.albedo, at(x, y).1));
     add_samples(scene, &mut out.normal, |x, y| (at(x, y).0.normal, at(x, y).1));
     add_samples(scene, &mut out.emitted, |x, y| (at(x, y).0.emitted, at(x, y).1));
+    if !scene.has_visible_lights() {
+        // Nothing to find: exact zeros, without the rays.
+        add_samples(scene, &mut out.emitted_dense, |x, y| (Rgb::ZERO, at(x, y).1));
+        return;
+    }
+    let k = features::DENSE_SAMPLES;
+    add_sample_sets(scene, &mut out.emitted_dense, k, |j| {
+        let index = |pixel: u64| (pixel, pass * k as u64 + j as u64);
+        let rows: Vec<Vec<(Rgb, Vec2)>> = (0..scene.height())
+            .into_par_iter()
+            .map(|y| {
+                Backend::current().run(DenseRow {
+                    scene,
+                    seed,
+                    y,
+                    index,
+                })
+            })
+            .collect();
+        move |x: u32, y: u32| rows[y as usize][x as usize]
+    });
+}
+
+/// One film row of dense emission rays, eight pixels to a packet, compiled for the process's
+/// backend (the packet traversal's lanes are its instruction set's; the bytes are the same on
+/// every one). `index(pixel)` is the pixel's sequence and the sample's index in it.
+struct DenseRow<'a, I> {
+    scene: &'a Scene,
+    seed: u64,
+    y: u32,
+    index: I,
+}
+
+impl<I: Fn(u64) -> (u64, u64)> pulp::WithSimd for DenseRow<'_, I> {
+    type Output = Vec<(Rgb, Vec2)>;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> Vec<(Rgb, Vec2)> {
+        let (scene, y) = (self.scene, self.y);
+        let w = scene.width();
+        let mut row = Vec::with_capacity(w as usize);
+        let (mut rays, mut samplers, mut at) = (
+            Vec::with_capacity(LANES),
+            Vec::with_capacity(LANES),
+            Vec::with_capacity(LANES),
+        );
+        for x0 in (0..w).step_by(LANES) {
+            rays.clear();
+            samplers.clear();
+            at.clear();
+            for x in x0..(x0 + LANES as u32).min(w) {
+                // One sequence per pixel across all passes (not split by parity: no noise
+                // estimate reads it), so an outline's coverage converges as a net of k points a
+                // pass would.
+                let (key, index) = (self.index)(y as u64 * w as u64 + x as u64);
+                let mut sampler = Sampler::sobol(self.seed, Stream::Emission, key, index);
+                let u_pixel = sampler.next_2d();
+                rays.push(scene.camera.generate_ray(x, y, u_pixel, sampler.next_2d()));
+                samplers.push(sampler);
+                at.push(u_pixel);
+            }
+            let le = features::direct_emission8(scene, &rays, &mut samplers);
+            row.extend(le.into_iter().zip(at.iter().copied()));
+        }
+        row
+    }
 }
 
 /// The camera ray of pixel (x, y) in pass `pass`, its offset within the pixel, and the sampler
@@ -578,6 +667,15 @@ mod tests {
                 assert_eq!(emitted[beside], image[beside]);
                 assert!(emitted.iter().zip(&image).all(|(e, i)| e.cmple(*i + 1e-6).all()));
             }
+            // The dense estimate of the same emission, from rays of its own: nothing where the
+            // sphere covers the pixel, and the same light where the own rays see it, to the
+            // noise of the outline.
+            let dense = f.emitted_dense.image().unwrap();
+            assert_eq!(f.emitted_dense.passes, 6);
+            assert_eq!(dense[centre], Rgb::ZERO);
+            let mean = |v: &[Rgb]| v.iter().map(|c| c.x as f64).sum::<f64>() / v.len() as f64;
+            let (m_own, m_dense) = (mean(&emitted), mean(&dense));
+            assert!((m_dense / m_own - 1.0).abs() < 0.05, "{m_dense} against {m_own}");
         }
     }
 

@@ -18,6 +18,9 @@ pub enum Stream {
     Camera = 1,
     /// Light paths (photons): the index is the photon.
     Photon = 2,
+    /// The denoiser's dense emission rays ([`crate::features::DENSE_SAMPLES`]): the index is
+    /// the pixel.
+    Emission = 3,
 }
 
 /// One path's random numbers.

@@ -25,18 +25,24 @@ pub fn denoise(image: &[Rgb], features: &Features) -> anyhow::Result<Vec<Rgb>> {
     let (w, h) = (features.albedo.width as usize, features.albedo.height as usize);
     anyhow::ensure!(image.len() == w * h, "the image and its features differ in size");
     let flat = |pixels: &[Rgb]| -> Vec<f32> { pixels.iter().flat_map(|p| [p.x, p.y, p.z]).collect() };
-    // Emission seen directly has no noise: it is kept out of the denoiser and added back. Where
-    // the image holds less than it (an integrator that does not count it), the image is kept.
-    let emitted: Vec<Rgb> = features
-        .emitted
-        .image()?
+    // Emission seen directly is kept out of the denoiser: the image's own is taken out, and the
+    // dense estimate of it added back (smoother where a light covers a pixel in part). Where
+    // the image holds less than its own (an integrator that does not count it), the image is
+    // kept as it is.
+    let own = features.emitted.image()?;
+    let dense = features.emitted_dense.image()?;
+    let (taken, added): (Vec<Rgb>, Vec<Rgb>) = own
         .iter()
+        .zip(&dense)
         .zip(image)
-        .map(|(e, i)| e.min(*i))
-        .collect();
+        .map(|((o, d), i)| {
+            let counted = o.cmple(*i);
+            (o.min(*i), Rgb::select(counted, *d, o.min(*i)))
+        })
+        .unzip();
     let rest: Vec<Rgb> = image
         .iter()
-        .zip(&emitted)
+        .zip(&taken)
         .map(|(i, e)| (*i - *e).max(Rgb::ZERO))
         .collect();
     let albedo = flat(&features.albedo_image()?);
@@ -44,7 +50,7 @@ pub fn denoise(image: &[Rgb], features: &Features) -> anyhow::Result<Vec<Rgb>> {
     let out = run_filter(&flat(&rest), &albedo, &normal, w, h)?;
     Ok(out
         .chunks_exact(3)
-        .zip(&emitted)
+        .zip(&added)
         .map(|(c, e)| Rgb::new(c[0], c[1], c[2]) + *e)
         .collect())
 }

@@ -60,7 +60,7 @@ fn layer(path: &Path, prefix: &str) -> Vec<Rgb> {
 /// The done-when's measure: cbox at 64 passes, denoised, against Mitsuba's 16384-spp
 /// reference. The raw image keeps its bytes' pixels, and the EXR carries albedo and normal.
 #[test]
-fn denoising_cbox_at_64_passes_more_than_halves_the_error_away_from_the_light() {
+fn denoising_cbox_at_64_passes_more_than_halves_the_error() {
     let dir = tempfile::tempdir().unwrap();
     let scene = refs().join("cbox.xml");
     let (plain, with) = (dir.path().join("plain.exr"), dir.path().join("cbox.exr"));
@@ -107,10 +107,11 @@ fn denoising_cbox_at_64_passes_more_than_halves_the_error_away_from_the_light() 
         e_denoised / e_raw,
         f_denoised / f_raw
     );
-    // Measured 0.21x away from the light, 0.57x in all: what is left is the noise of the light's
-    // outline, kept as rendered (docs/denoising.md).
+    // Measured 0.21x away from the light and 0.24x in all (0.57x before the light's outline
+    // was added back from the dense emission rays: docs/denoising.md). The figure is
+    // half.
     assert!(f_denoised < 0.35 * f_raw);
-    assert!(e_denoised < 0.65 * e_raw);
+    assert!(e_denoised < 0.5 * e_raw);
 
     // The features: the red wall's reflectance exactly, its normal facing +x; the light's
     // albedo is its radiance clamped (one).

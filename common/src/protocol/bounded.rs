@@ -13,6 +13,7 @@ use std::marker::PhantomData;
 use serde::Deserialize;
 use serde::de::{DeserializeSeed, Deserializer, Error as _, SeqAccess, Visitor};
 
+use crate::features::Features;
 use crate::film::FilmSum;
 use crate::parity::{OddSums, sample_len};
 
@@ -23,13 +24,13 @@ pub(super) struct SumSeed {
     pub height: u32,
 }
 
-/// A `PFBATCH2` result: the sum and its odd passes' sample; with `features`, a `PFBATCH3` one,
-/// followed by the three sums of the denoiser's features (albedo, normal, emitted), each of the
-/// sum's size.
+/// A `PFBATCH2` result: the sum and its odd passes' sample, followed by `features` sums of the
+/// denoiser's features (in the order of `Features::NAMES`: four in `PFBATCH4`, the first three
+/// in `PFBATCH3`), each of the sum's size.
 #[derive(Clone, Copy)]
 pub(super) struct ResultSeed {
     pub sum: SumSeed,
-    pub features: bool,
+    pub features: usize,
 }
 
 /// An [`OddSums`] with at most `len` sampled pixels.
@@ -170,13 +171,13 @@ impl<'de> Visitor<'de> for OddSeed {
 }
 
 /// What a [`ResultSeed`] reads.
-pub(super) type Decoded = (FilmSum, OddSums, Option<[FilmSum; 3]>);
+pub(super) type Decoded = (FilmSum, OddSums, Vec<FilmSum>);
 
 impl<'de> DeserializeSeed<'de> for ResultSeed {
     type Value = Decoded;
 
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Self::Value, D::Error> {
-        d.deserialize_tuple(if self.features { 5 } else { 2 }, self)
+        d.deserialize_tuple(2 + self.features, self)
     }
 }
 
@@ -185,7 +186,7 @@ impl<'de> Visitor<'de> for ResultSeed {
 
     fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
         write!(f, "a sum and its odd passes' sample")?;
-        if self.features {
+        if self.features > 0 {
             write!(f, ", then its features")?;
         }
         Ok(())
@@ -195,15 +196,10 @@ impl<'de> Visitor<'de> for ResultSeed {
         let sum = field(&mut seq, self.sum, "sum")?;
         let len = sample_len(self.sum.width, self.sum.height);
         let odd = field(&mut seq, OddSeed { len }, "odd")?;
-        let features = if self.features {
-            Some([
-                field(&mut seq, self.sum, "albedo")?,
-                field(&mut seq, self.sum, "normal")?,
-                field(&mut seq, self.sum, "emitted")?,
-            ])
-        } else {
-            None
-        };
+        let features = Features::NAMES[..self.features.min(Features::NAMES.len())]
+            .iter()
+            .map(|name| field(&mut seq, self.sum, name))
+            .collect::<Result<_, _>>()?;
         Ok((sum, odd, features))
     }
 }

@@ -375,7 +375,7 @@ async fn forward(relay: Arc<Relay>, lease: Lease) {
     let body = tokio::task::spawn_blocking(move || {
         let s = sum.lock().unwrap_or_else(|p| p.into_inner());
         let film = s.sum.as_ref()?;
-        // Features travel with the odd sample (PFBATCH3): see BatchSum::add.
+        // Features travel with the odd sample (PFBATCH4): see BatchSum::add.
         let plain = match &s.odd {
             Some(odd) => encode_result(film, odd, s.features.as_ref()),
             None => encode_batch(film),

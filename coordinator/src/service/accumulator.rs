@@ -327,7 +327,7 @@ mod tests {
     #[test]
     fn features_follow_the_prefix_into_checkpoints() {
         let features = |v: i64, passes: u64| {
-            Features::from_sums([part(v, passes), part(2 * v, passes), part(3 * v, passes)])
+            Features::from_sums(std::array::from_fn(|k| part((k as i64 + 1) * v, passes)))
         };
         let mut a = Accumulator::empty(1, 1, 4).with_features();
         for (start, passes, v) in [(2u64, 2u64, 20i64), (4, 1, 40), (0, 2, 1)] {

@@ -347,8 +347,12 @@ fn accept_bundle(
     if settings.denoise && !crate::denoise::AVAILABLE {
         return Err(bad(format!("denoise: {}", crate::denoise::UNAVAILABLE)));
     }
-    // A job with features holds four sums of its film (the image and three features).
-    let sums_per_pixel: u64 = if settings.features() { 4 } else { 1 };
+    // A job with features holds five sums of its film (the image and four features).
+    let sums_per_pixel: u64 = if settings.features() {
+        1 + photonfarm::features::Features::NAMES.len() as u64
+    } else {
+        1
+    };
     let scene_rel =
         match scene {
             Some(s) => PathBuf::from(s),
@@ -424,7 +428,7 @@ fn accept_bundle(
             let px = checked.width as u64 * checked.height as u64;
             if px * sums_per_pixel > limits.job.max_pixels {
                 return Err(too_large(format!(
-                    "with the denoiser's features a job holds four sums of its {px}-pixel film, above the \
+                    "with the denoiser's features a job holds {sums_per_pixel} sums of its {px}-pixel film, above the \
                      limit of {} pixels (--max-pixels)",
                     limits.job.max_pixels
                 )));

@@ -402,7 +402,7 @@ impl Layout {
         odd: Option<&OddSums>,
         features: Option<&Features>,
     ) -> Result<(), StoreError> {
-        // Features travel with the odd sample (PFBATCH3): a prefix without one (merged from a
+        // Features travel with the odd sample (PFBATCH4): a prefix without one (merged from a
         // worker too old for either) has no features either.
         let bytes = match odd {
             Some(odd) => encode_result(prefix, odd, features),
