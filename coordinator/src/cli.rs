@@ -193,7 +193,8 @@ pub struct ConvergeArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Also measure each line's denoised preview (a line NAME+denoised; Open Image Denoise,
-    /// as `render --denoise`).
+    /// as `render --denoise`), in a render of its own with the features, so the raw line keeps
+    /// the speed of a render without them. Doubles the run's time.
     #[arg(long)]
     pub denoise: bool,
     /// Override a scene parameter; repeatable.
