@@ -89,6 +89,10 @@ pub struct WaitArgs {
     /// OUT with `.denoised` before its extension (as `render --denoise` names it).
     #[arg(long, requires = "out")]
     pub denoised: bool,
+    /// Give up after this many seconds with the job unfinished (status 1, saying how far it
+    /// got); the job goes on. Without it, waits for as long as the job takes.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_timeout)]
+    pub timeout: Option<std::time::Duration>,
     /// The coordinator.
     #[command(flatten)]
     pub conn: ConnectionArgs,
@@ -556,6 +560,9 @@ pub struct SubmitArgs {
     /// Wait for the job to finish, showing progress.
     #[arg(long)]
     pub wait: bool,
+    /// With --wait: give up waiting after this many seconds (as `wait --timeout`).
+    #[arg(long, value_name = "SECONDS", requires = "wait", value_parser = parse_timeout)]
+    pub timeout: Option<std::time::Duration>,
     /// With --wait: where to write the final image (.exr or .png).
     #[arg(long, short, requires = "wait")]
     pub out: Option<PathBuf>,
@@ -585,5 +592,15 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::CheckScene(args) => {
             crate::service::scene_check::run_child(&args.scene, &args.root, &args.settings, &args.out)
         }
+    }
+}
+
+/// A positive, finite number of seconds.
+fn parse_timeout(s: &str) -> Result<std::time::Duration, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() => {
+            std::time::Duration::try_from_secs_f64(v).map_err(|e| e.to_string())
+        }
+        _ => Err(format!("expected a positive number of seconds, got {s:?}")),
     }
 }

@@ -58,6 +58,11 @@ pub fn denoise(image: &[Rgb], features: &Features) -> anyhow::Result<Vec<Rgb>> {
 #[cfg(feature = "denoise")]
 fn run_filter(color: &[f32], albedo: &[f32], normal: &[f32], w: usize, h: usize) -> anyhow::Result<Vec<f32>> {
     use anyhow::Context;
+    // One filter at a time in a process: OIDN already spreads one over every core, so a second
+    // at once only competes for them, and a coordinator may finish checkpoints of several jobs
+    // together. (The lock guards no data: a poisoned one is as good.)
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     // The CPU device: the same code on every machine of a kind, whatever GPUs it has.
     let device = oidn::Device::cpu()
         .map_err(oidn_error)

@@ -265,7 +265,12 @@ fn a_farm_job_with_features_survives_a_restart_and_gives_the_local_bytes() {
     let _w2 = worker(&url, "w2", dir.path());
     let cli = |args: &[&str]| {
         let o = Command::new(coordinator_bin()).args(args).output().unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            o.status.success(),
+            "{}\n{}",
+            String::from_utf8_lossy(&o.stderr),
+            support::logs(dir.path())
+        );
         String::from_utf8_lossy(&o.stdout).trim().to_string()
     };
     let mut submit = vec!["submit", "--to", &url, scene.to_str().unwrap()];
@@ -283,7 +288,11 @@ fn a_farm_job_with_features_survives_a_restart_and_gives_the_local_bytes() {
     };
     let start = Instant::now();
     while done(&url) < 17 {
-        assert!(start.elapsed() < Duration::from_secs(120), "no passes arrived");
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no passes arrived\n{}",
+            support::logs(dir.path())
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     coordinator.sigkill();
@@ -298,6 +307,8 @@ fn a_farm_job_with_features_survives_a_restart_and_gives_the_local_bytes() {
         "--out",
         farm.to_str().unwrap(),
         "--denoised",
+        "--timeout",
+        "300",
     ]);
     assert!(
         std::fs::read(&farm).unwrap() == std::fs::read(&local).unwrap(),
@@ -317,7 +328,7 @@ fn a_farm_job_with_features_survives_a_restart_and_gives_the_local_bytes() {
         "-D",
         "res=8",
     ]);
-    cli(&["wait", &plain, "--to", &url]);
+    cli(&["wait", &plain, "--to", &url, "--timeout", "300"]);
     let o = Command::new(coordinator_bin())
         .args(["fetch", &plain, "--to", &url, "--out"])
         .arg(dir.path().join("p.exr"))

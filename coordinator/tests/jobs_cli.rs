@@ -1,5 +1,5 @@
 //! The job commands against a real coordinator and worker: `jobs`, `status` (saying when no
-//! worker has asked for work), `wait --out`, `fetch` and `cancel`.
+//! worker has asked for work), `wait --out` and `--timeout`, `fetch` and `cancel`.
 
 mod support;
 
@@ -48,10 +48,29 @@ fn jobs_status_wait_fetch_and_cancel() {
     );
     let o = coordinator(&["jobs", "--to", &url]);
     assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("job {id}: queued")));
+    // Waiting with a timeout on a job nobody renders gives up, says how far it got, and leaves
+    // the job as it was.
+    let o = coordinator(&["wait", &id, "--to", &url, "--timeout", "1.5"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("still queued after 1.5 s (0 of 8 passes done"),
+        "{err}"
+    );
+    let o = coordinator(&["wait", &id, "--to", &url, "--timeout", "0"]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("expected a positive number of seconds"));
 
     let _w = worker(&url, "w1", dir.path());
     let image = dir.path().join("waited.exr");
-    let o = coordinator(&["wait", &id, "--to", &url, "--out", image.to_str().unwrap()]);
+    let o = coordinator(&[
+        "wait",
+        &id,
+        "--to",
+        &url,
+        "--out",
+        image.to_str().unwrap(),
+        "--timeout",
+        "300",
+    ]);
     assert!(o.status.success());
     let png = dir.path().join("fetched.png");
     let o = coordinator(&["fetch", &id, "--to", &url, "--out", png.to_str().unwrap()]);
@@ -64,7 +83,7 @@ fn jobs_status_wait_fetch_and_cancel() {
     let long = submit(&url, "1000000");
     let o = coordinator(&["cancel", &long, "--to", &url]);
     assert!(o.status.success() && String::from_utf8_lossy(&o.stdout).contains("cancelled"));
-    let o = coordinator(&["wait", &long, "--to", &url]);
+    let o = coordinator(&["wait", &long, "--to", &url, "--timeout", "300"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("cancelled"));
     // An unknown job is a clear error.
     let o = coordinator(&["status", "999", "--to", &url]);

@@ -178,7 +178,7 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
         if !args.wait {
             return Ok(());
         }
-        wait_for(&client, id).await?;
+        wait_for(&client, id, args.timeout).await?;
         if let Some(out) = &args.out {
             fetch(&client, id, out, settings.denoise).await?;
         }
@@ -187,8 +187,9 @@ pub fn run_submit(args: &SubmitArgs) -> anyhow::Result<()> {
 }
 
 /// Follows a job with a progress bar until it ends; an error unless it is done. While it is
-/// queued and no worker has asked for work, says so instead of an endless estimate.
-pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
+/// queued and no worker has asked for work, says so instead of an endless estimate. Past
+/// `timeout`, an error saying how far the job got (a script's or a test's bound on a stall).
+pub async fn wait_for(client: &ApiClient, id: u64, timeout: Option<Duration>) -> anyhow::Result<()> {
     let start = Instant::now();
     let mut reporter: Option<Reporter> = None;
     let mut said_idle = false;
@@ -226,6 +227,22 @@ pub async fn wait_for(client: &ApiClient, id: u64) -> anyhow::Result<()> {
             reporter
                 .get_or_insert_with(|| Reporter::new(total, "passes"))
                 .update(s.iterations_done, total, start.elapsed());
+        }
+        if let Some(limit) = timeout
+            && start.elapsed() >= limit
+        {
+            if let Some(r) = reporter.as_mut() {
+                r.finish();
+            }
+            bail!(
+                "job {id} is still {} after {} s ({} of {} passes done; {} workers present): \
+                 stopped waiting, the job goes on",
+                s.state.as_str(),
+                limit.as_secs_f64(),
+                s.iterations_done,
+                s.iterations_total,
+                s.workers_present
+            );
         }
         tokio::time::sleep(Duration::from_millis(500)).await;
     };
@@ -363,7 +380,7 @@ pub fn run_job_command(command: &crate::cli::JobCommand) -> anyhow::Result<()> {
             }
             JobCommand::Status(a) => println!("{}", describe(&client.status(a.id).await?)),
             JobCommand::Wait(a) => {
-                wait_for(&client, a.id).await?;
+                wait_for(&client, a.id, a.timeout).await?;
                 if let Some(out) = &a.out {
                     fetch(&client, a.id, out, a.denoised).await?;
                 }

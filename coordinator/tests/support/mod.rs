@@ -84,18 +84,57 @@ pub fn serve_limited(
     command
         .args(["serve", "--bind", bind, "--data", data.to_str().unwrap()])
         .args(extra)
-        .envs(env.iter().copied());
-    announced(command)
+        .envs(env.iter().copied())
+        .stderr(log_file(&data.with_extension("log")));
+    announced_logging(command)
+}
+
+/// A log file beside a test's files, appended to (a restarted program adds to its log).
+fn log_file(path: &Path) -> std::fs::File {
+    if let Some(parent) = path.parent() {
+        std::fs::create_dir_all(parent).unwrap();
+    }
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .unwrap()
+}
+
+/// The last lines of every `*.log` in `dir` (the coordinators' and workers' logs that
+/// [`serve`] and [`worker`] keep there), for a failing test to show what the programs said.
+pub fn logs(dir: &Path) -> String {
+    let mut names: Vec<PathBuf> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "log"))
+        .collect();
+    names.sort();
+    let mut out = String::new();
+    for p in names {
+        let text = std::fs::read_to_string(&p).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        out += &format!("--- {} (last 40 lines)\n", p.display());
+        for l in &lines[lines.len().saturating_sub(40)..] {
+            out += l;
+            out += "\n";
+        }
+    }
+    out
 }
 
 /// Starts a `coordinator serve` or `coordinator relay` command and returns it with the URL its
 /// first line announces ("listening on URL").
 pub fn announced(mut command: Command) -> (Proc, String) {
-    let mut child = command
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    command.stderr(Stdio::null());
+    announced_logging(command)
+}
+
+/// [`announced`] with the command's stderr as it was set (a log file).
+fn announced_logging(mut command: Command) -> (Proc, String) {
+    let mut child = command.stdout(Stdio::piped()).spawn().unwrap();
     let mut line = String::new();
     BufReader::new(child.stdout.take().unwrap())
         .read_line(&mut line)
@@ -121,7 +160,7 @@ pub fn worker_with_env(url: &str, name: &str, cache: &Path, env: &[(&str, &str)]
             .arg(cache.join(name))
             .envs(env.iter().copied())
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(log_file(&cache.join(format!("{name}.log"))))
             .spawn()
             .unwrap(),
     )
