@@ -133,18 +133,27 @@ pub fn announced(mut command: Command) -> (Proc, String) {
 }
 
 /// [`announced`] with the command's stderr as it was set (a log file).
+/// Waits at most two minutes for the line: a service that never comes up fails the test (and
+/// is killed) instead of holding up the whole run.
 fn announced_logging(mut command: Command) -> (Proc, String) {
     let mut child = command.stdout(Stdio::piped()).spawn().unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let child = Proc(child);
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let _ = BufReader::new(stdout).read_line(&mut line);
+        let _ = tx.send(line);
+    });
+    let line = rx
+        .recv_timeout(std::time::Duration::from_secs(120))
+        .expect("the service did not announce its address within 120 s");
     let url = line
         .trim()
         .strip_prefix("listening on ")
         .expect("the service announces its address")
         .to_string();
-    (Proc(child), url)
+    (child, url)
 }
 
 /// Starts a one-thread worker named `name`, caching bundles under `cache`.
