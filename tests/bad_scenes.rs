@@ -506,3 +506,82 @@ fn roughness_and_projector_mistakes() {
         "a projector's to_world places and turns it",
     );
 }
+
+#[test]
+fn mesh_attribute_mistakes() {
+    let attr = |name: &str, param: &str| {
+        format!(
+            "<texture type=\"mesh_attribute\" name=\"{param}\"><string name=\"name\" value=\"{name}\"/></texture>"
+        )
+    };
+    let obj = |bsdf: &str| {
+        format!("<shape type=\"obj\"><string name=\"filename\" value=\"inside.obj\"/>{bsdf}</shape>")
+    };
+    expect_error(
+        &scene_text(
+            &obj(&format!(
+                "<bsdf type=\"diffuse\">{}</bsdf>",
+                attr("color", "reflectance")
+            )),
+            FILM,
+        ),
+        8,
+        "a mesh attribute's name starts with vertex_ or face_, not \"color\"",
+    );
+    expect_error(
+        &scene_text(
+            &obj(&format!(
+                "<bsdf type=\"diffuse\">{}</bsdf>",
+                attr("vertex_color", "reflectance")
+            )),
+            FILM,
+        ),
+        8,
+        "its material reads mesh attribute \"vertex_color\", which the mesh has not (it has: none)",
+    );
+    expect_error(
+        &scene_text(
+            &format!(
+                "<shape type=\"sphere\"><bsdf type=\"diffuse\">{}</bsdf></shape>",
+                attr("vertex_color", "reflectance")
+            ),
+            FILM,
+        ),
+        8,
+        "a sphere is not a mesh with attributes",
+    );
+    expect_error(
+        &scene_text(
+            &obj(&format!(
+                "<bsdf type=\"blendbsdf\">{}<bsdf type=\"diffuse\">{}</bsdf><bsdf type=\"diffuse\"/></bsdf>",
+                attr("face_weight", "weight"),
+                attr("vertex_color", "reflectance")
+            )),
+            FILM,
+        ),
+        8,
+        "reads mesh attributes face_weight, vertex_color: one per shape is supported",
+    );
+    expect_error(
+        &scene_text(
+            &obj(&format!(
+                "<bsdf type=\"plastic\">{}</bsdf>",
+                attr("vertex_color", "diffuse_reflectance")
+            )),
+            FILM,
+        ),
+        8,
+        "plastic's diffuse_reflectance cannot be a mesh_attribute",
+    );
+    expect_error(
+        &scene_text(
+            &obj(&format!(
+                "<emitter type=\"area\">{}</emitter>",
+                attr("vertex_color", "radiance")
+            )),
+            FILM,
+        ),
+        8,
+        "a light's radiance cannot be a mesh_attribute",
+    );
+}

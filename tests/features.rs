@@ -11,7 +11,8 @@
 //! - `instances.xml`: a shape group of three shapes, placed five times (one mirrored);
 //! - `polarizer.xml`: Mitsuba's `polarizer`, as its RGB variants render it;
 //! - `direct-projective.xml`: Mitsuba's `direct_projective` integrator, its primal image;
-//! - `orthographic.xml`: `meshes.xml` through Mitsuba's orthographic sensor, on a 3:2 film.
+//! - `orthographic.xml`: `meshes.xml` through Mitsuba's orthographic sensor, on a 3:2 film;
+//! - `mesh-attributes.xml`: `mesh_attribute` textures from PLY vertex and face properties.
 //!
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
@@ -145,4 +146,13 @@ fn projector_matches_mitsuba() {
 #[test]
 fn cylinders_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("cylinder");
+}
+
+/// `mesh-attributes.xml`: PLY vertex colours as a diffuse reflectance, a one-channel face weight
+/// blending two materials, scaled three-channel face colours tinting a rough conductor, and
+/// `red green blue` vertex colours on a floor.
+#[test]
+fn mesh_attributes_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("mesh-attributes");
+    photonfarm_tests::check_sppm_convergence("mesh-attributes");
 }

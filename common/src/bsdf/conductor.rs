@@ -4,7 +4,7 @@ use super::BsdfSample;
 use super::fresnel::{fresnel_conductor, reflect, reflect_about};
 use super::microfacet::Roughness;
 use crate::color::Rgb;
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// A metal: smooth (a perfect mirror with conductor Fresnel) or rough (GGX).
 #[derive(Clone, Debug)]
@@ -20,11 +20,11 @@ pub struct Conductor {
 }
 
 impl Conductor {
-    fn fresnel(&self, uv: Vec2, cos: f32) -> Rgb {
+    fn fresnel(&self, uv: &TexAt, cos: f32) -> Rgb {
         self.specular.at(uv) * fresnel_conductor(cos, self.eta, self.k)
     }
 
-    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: &TexAt, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
         if wi.z <= 0.0 {
             return None;
         }
@@ -53,7 +53,7 @@ impl Conductor {
         })
     }
 
-    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+    pub(super) fn eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> Rgb {
         let Some(ggx) = self.roughness.as_ref().map(|r| r.at(uv)) else {
             return Rgb::ZERO;
         };
@@ -68,7 +68,7 @@ impl Conductor {
         self.fresnel(uv, wi.dot(m)) * (d * ggx.g(wi, wo, m) / (4.0 * wi.z))
     }
 
-    pub(super) fn pdf(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> f32 {
+    pub(super) fn pdf(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> f32 {
         let Some(ggx) = self.roughness.as_ref().map(|r| r.at(uv)) else {
             return 0.0;
         };

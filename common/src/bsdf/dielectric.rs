@@ -1,9 +1,9 @@
-use glam::{Vec2, Vec3A};
+use glam::Vec3A;
 
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::{BsdfSample, TransportMode};
 use crate::color::Rgb;
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// A smooth glass interface: Fresnel-weighted choice between mirror reflection and refraction,
 /// with total internal reflection. Both sides are glass.
@@ -18,7 +18,7 @@ pub struct Dielectric {
 }
 
 impl Dielectric {
-    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u: f32, mode: TransportMode) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: &TexAt, wi: Vec3A, u: f32, mode: TransportMode) -> Option<BsdfSample> {
         let (r, cos_t, eta_it, eta_ti) = fresnel_dielectric(wi.z, self.eta);
         if u < r {
             Some(BsdfSample {

@@ -5,7 +5,7 @@ use glam::{Vec2, Vec3A};
 use super::BsdfSample;
 use crate::color::Rgb;
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// Lambertian reflection, one-sided as in Mitsuba (the back is black; use `twosided`).
 #[derive(Clone, Debug)]
@@ -15,7 +15,7 @@ pub struct Diffuse {
 }
 
 impl Diffuse {
-    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: &TexAt, wi: Vec3A, u: Vec2) -> Option<BsdfSample> {
         if wi.z <= 0.0 {
             return None;
         }
@@ -30,7 +30,7 @@ impl Diffuse {
         })
     }
 
-    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+    pub(super) fn eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> Rgb {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Rgb::ZERO;
         }

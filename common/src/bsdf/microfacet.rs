@@ -55,7 +55,7 @@ impl Roughness {
 
     /// The distribution at `uv`; roughness below 1e-4 is raised to it, as Mitsuba does.
     #[inline]
-    pub fn at(&self, uv: glam::Vec2) -> Microfacet {
+    pub fn at(&self, uv: &crate::texture::TexAt) -> Microfacet {
         let alpha_u = self.alpha_u.at(uv).max(1e-4);
         Microfacet {
             distribution: self.distribution,

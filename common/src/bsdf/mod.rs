@@ -27,7 +27,7 @@ use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
 use crate::geometry::Frame;
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// Where a material is evaluated: its texture coordinates, and the surface around the point in
 /// world space, which bump and normal maps tilt the shading frame by. Directions given to a
@@ -36,6 +36,8 @@ use crate::texture::Param;
 pub struct SurfaceAt {
     /// Texture coordinates.
     pub uv: Vec2,
+    /// The mesh attribute the material reads, interpolated here ([`TexAt::attr`]).
+    pub attr: Rgb,
     /// The shading frame the directions are local to.
     pub frame: Frame,
     /// ∂p/∂u, with its length (a bump map's slope is relative to it).
@@ -47,11 +49,21 @@ pub struct SurfaceAt {
 }
 
 impl SurfaceAt {
+    /// Where the material's textures are looked up.
+    #[inline]
+    pub fn tex(&self) -> TexAt {
+        TexAt {
+            uv: self.uv,
+            attr: self.attr,
+        }
+    }
+
     /// A flat surface in the xy plane, facing +z, parameterised by x and y: for materials
     /// tested on their own.
     pub const fn flat(uv: Vec2) -> SurfaceAt {
         SurfaceAt {
             uv,
+            attr: Rgb::ZERO,
             frame: Frame {
                 s: Vec3A::X,
                 t: Vec3A::Y,
@@ -134,7 +146,7 @@ impl Bsdf {
         u2: Vec2,
         mode: TransportMode,
     ) -> Option<BsdfSample> {
-        let uv = at.uv;
+        let uv = &at.tex();
         match self {
             Bsdf::Diffuse(b) => b.sample(uv, wi, u2),
             Bsdf::Conductor(b) => b.sample(uv, wi, u2),
@@ -166,7 +178,7 @@ impl Bsdf {
             Bsdf::Perturbed(b) => b.sample(at, wi, u1, u2, mode),
             Bsdf::Null | Bsdf::Polarizer(_) => Some(BsdfSample {
                 wo: -wi,
-                weight: self.null_transmission(uv),
+                weight: self.null_transmission(*uv),
                 pdf: 1.0,
                 delta: true,
                 eta: 1.0,
@@ -215,7 +227,7 @@ impl Bsdf {
     /// [`Bsdf::eval`] for either transport mode (a particle tracer's connections to the camera
     /// are importance transport).
     pub fn eval_mode(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
-        let uv = at.uv;
+        let uv = &at.tex();
         match self {
             Bsdf::Diffuse(b) => b.eval(uv, wi, wo),
             Bsdf::Conductor(b) => b.eval(uv, wi, wo),
@@ -242,7 +254,7 @@ impl Bsdf {
 
     /// Density with which [`Bsdf::sample`] returns `wo` from its non-delta lobes at `at`.
     pub fn pdf(&self, at: &SurfaceAt, wi: Vec3A, wo: Vec3A) -> f32 {
-        let uv = at.uv;
+        let uv = &at.tex();
         match self {
             Bsdf::Diffuse(b) => b.pdf(wi, wo),
             Bsdf::Conductor(b) => b.pdf(uv, wi, wo),
@@ -344,7 +356,7 @@ impl Bsdf {
 
     /// What a surface that [`Bsdf::is_null`] passes at `uv` (Mitsuba's
     /// `eval_null_transmission`).
-    pub fn null_transmission(&self, uv: Vec2) -> Rgb {
+    pub fn null_transmission(&self, uv: TexAt) -> Rgb {
         match self {
             Bsdf::Polarizer(t) => 0.5 * t.at(uv),
             _ => Rgb::ONE,

@@ -51,7 +51,7 @@ impl Perturbed {
     fn frame(&self, at: &SurfaceAt, wi: Vec3A) -> Frame {
         let mut n = match &self.by {
             Perturbation::Normal(map) => {
-                let c = map.eval(at.uv);
+                let c = map.eval(at.tex());
                 Vec3A::new(2.0 * c.x - 1.0, 2.0 * c.y - 1.0, 2.0 * c.z - 1.0)
             }
             Perturbation::Bump { height, scale } => {

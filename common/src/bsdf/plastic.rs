@@ -7,7 +7,7 @@ use super::fresnel::{diffuse_fresnel_reflectance, fresnel_dielectric, reflect, r
 use super::microfacet::Microfacet;
 use crate::color::Rgb;
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// Diffuse base under a dielectric coating (Mitsuba's `plastic` and `roughplastic`).
 ///
@@ -88,7 +88,7 @@ impl Plastic {
         self.transmittance_table[i] * (1.0 - f) + self.transmittance_table[i + 1] * f
     }
 
-    fn diffuse_eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+    fn diffuse_eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> Rgb {
         let diffuse = self.diffuse.at(uv);
         let base = if self.nonlinear {
             diffuse / (Rgb::ONE - diffuse * self.internal_reflectance)
@@ -109,7 +109,7 @@ impl Plastic {
         (ps / (ps + pd), pd / (ps + pd))
     }
 
-    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u1: f32, u2: Vec2) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: &TexAt, wi: Vec3A, u1: f32, u2: Vec2) -> Option<BsdfSample> {
         if wi.z <= 0.0 {
             return None;
         }
@@ -157,7 +157,7 @@ impl Plastic {
         }
     }
 
-    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> Rgb {
+    pub(super) fn eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> Rgb {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Rgb::ZERO;
         }

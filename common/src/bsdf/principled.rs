@@ -17,7 +17,7 @@ use super::microfacet::{Distribution, Microfacet};
 use super::{BsdfSample, TransportMode};
 use crate::color::{Rgb, luminance};
 use crate::sampling::{square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf};
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// The principled BSDF's parameters, each a number or a texture where Mitsuba accepts one.
 #[derive(Clone, Debug)]
@@ -183,7 +183,7 @@ fn compatible(m: Vec3A, wi: Vec3A, wo: Vec3A, cos_i: f32, reflection: bool) -> b
 }
 
 impl Principled {
-    fn at(&self, uv: Vec2) -> At {
+    fn at(&self, uv: &TexAt) -> At {
         let roughness = self.roughness.at(uv);
         let anisotropic = self.anisotropic.at(uv).min(1.0);
         // Mitsuba's calc_dist_params.
@@ -204,7 +204,7 @@ impl Principled {
         }
     }
 
-    fn clearcoat_distribution(&self, uv: Vec2) -> Gtr1 {
+    fn clearcoat_distribution(&self, uv: &TexAt) -> Gtr1 {
         let gloss = self.clearcoat_gloss.at(uv);
         // dr::lerp(0.1, 0.001, gloss).
         Gtr1 {
@@ -270,7 +270,7 @@ impl Principled {
 
     pub(super) fn sample(
         &self,
-        uv: Vec2,
+        uv: &TexAt,
         wi: Vec3A,
         u1: f32,
         u2: Vec2,
@@ -331,7 +331,7 @@ impl Principled {
     }
 
     /// f · |cos θo|; refraction scales radiance, not importance, by 1/η².
-    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
+    pub(super) fn eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
         let (cos_i, cos_o) = (wi.z, wo.z);
         if cos_i == 0.0 {
             return Rgb::ZERO;
@@ -429,7 +429,7 @@ impl Principled {
         value
     }
 
-    pub(super) fn pdf(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> f32 {
+    pub(super) fn pdf(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> f32 {
         let cos_i = wi.z;
         if cos_i == 0.0 {
             return 0.0;

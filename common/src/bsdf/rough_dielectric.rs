@@ -7,7 +7,7 @@ use super::fresnel::{fresnel_dielectric, half_vector, reflect_about};
 use super::microfacet::Roughness;
 use super::{BsdfSample, TransportMode};
 use crate::color::Rgb;
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// A rough dielectric interface. Both sides are glass.
 #[derive(Clone, Debug)]
@@ -30,7 +30,7 @@ fn mulsign(v: Vec3A, cos: f32) -> Vec3A {
 impl RoughDielectric {
     pub(super) fn sample(
         &self,
-        uv: Vec2,
+        uv: &TexAt,
         wi: Vec3A,
         u1: f32,
         u2: Vec2,
@@ -84,7 +84,7 @@ impl RoughDielectric {
     }
 
     /// f · |cos θo|; transmission is scaled for radiance as in [`RoughDielectric::sample`].
-    pub(super) fn eval(&self, uv: Vec2, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
+    pub(super) fn eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A, mode: TransportMode) -> Rgb {
         let cos_i = wi.z;
         if cos_i == 0.0 {
             return Rgb::ZERO;
@@ -113,7 +113,7 @@ impl RoughDielectric {
         }
     }
 
-    pub(super) fn pdf(&self, uv: Vec2, wi: Vec3A, wo: Vec3A) -> f32 {
+    pub(super) fn pdf(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> f32 {
         let cos_i = wi.z;
         if cos_i == 0.0 {
             return 0.0;

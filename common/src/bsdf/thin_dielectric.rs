@@ -1,12 +1,12 @@
 //! Mitsuba's `thindielectric`: a thin pane of glass, whose two interfaces reflect and transmit
 //! with the sum of all internal bounces; transmitted light goes straight on.
 
-use glam::{Vec2, Vec3A};
+use glam::Vec3A;
 
 use super::BsdfSample;
 use super::fresnel::{fresnel_dielectric, reflect};
 use crate::color::Rgb;
-use crate::texture::Param;
+use crate::texture::{Param, TexAt};
 
 /// A thin dielectric sheet.
 #[derive(Clone, Debug)]
@@ -31,7 +31,7 @@ impl ThinDielectric {
         }
     }
 
-    pub(super) fn sample(&self, uv: Vec2, wi: Vec3A, u: f32) -> Option<BsdfSample> {
+    pub(super) fn sample(&self, uv: &TexAt, wi: Vec3A, u: f32) -> Option<BsdfSample> {
         let r = self.reflectance(wi.z);
         Some(if u <= r {
             BsdfSample {

@@ -447,7 +447,11 @@ fn textured_reflectance(
             None => glam::Vec2::new(b1, b2),
         };
         let (front, behind) = &ds.textures[k as usize];
-        let c = if back.get(i) { behind } else { front }.at(uv);
+        let at = crate::texture::TexAt {
+            uv,
+            attr: t.attr_at(b1, b2),
+        };
+        let c = if back.get(i) { behind } else { front }.at(at);
         (refl.x.0[i], refl.y.0[i], refl.z.0[i]) = (c.x, c.y, c.z);
     }
 }

@@ -114,6 +114,7 @@ impl Cylinder {
             ns: n,
             shape: self.shape,
             uv,
+            attr: Vec3A::ZERO,
             dpdu,
             dpdv,
         }

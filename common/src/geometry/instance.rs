@@ -148,6 +148,7 @@ mod tests {
                     p: c.map(|p| Vec3A::from(m.transform_point3(p))),
                     n: None,
                     uv: None,
+                    attr: None,
                     shape: 0,
                     flip: false,
                 })

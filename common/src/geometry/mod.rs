@@ -81,6 +81,8 @@ pub struct SurfacePoint {
     pub shape: u32,
     /// Texture coordinates, parameterised as Mitsuba's shapes are.
     pub uv: glam::Vec2,
+    /// The mesh attribute its material reads, interpolated (zero on other shapes).
+    pub attr: Vec3A,
     /// ∂p/∂u as Mitsuba's shapes give it (may be zero where the parameterisation is
     /// singular): anisotropic materials orient their frame by it, bump maps scale by it.
     pub dpdu: Vec3A,
@@ -89,6 +91,15 @@ pub struct SurfacePoint {
 }
 
 impl SurfacePoint {
+    /// Where its material's textures are looked up.
+    #[inline]
+    pub fn tex(&self) -> crate::texture::TexAt {
+        crate::texture::TexAt {
+            uv: self.uv,
+            attr: self.attr,
+        }
+    }
+
     /// A point inside a medium: no surface, no error box, no normal.
     pub fn in_medium(p: Vec3A) -> SurfacePoint {
         SurfacePoint {
@@ -98,6 +109,7 @@ impl SurfacePoint {
             ns: Vec3A::ZERO,
             shape: u32::MAX,
             uv: glam::Vec2::ZERO,
+            attr: Vec3A::ZERO,
             dpdu: Vec3A::ZERO,
             dpdv: Vec3A::ZERO,
         }

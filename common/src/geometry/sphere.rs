@@ -99,6 +99,7 @@ impl Sphere {
             ns: n,
             shape: self.shape,
             uv,
+            attr: Vec3A::ZERO,
             dpdu,
             dpdv,
         }

@@ -12,6 +12,9 @@ pub struct Triangle {
     /// Vertex texture coordinates, if the mesh has them (otherwise (u, v) is the barycentric
     /// position (b1, b2), as in Mitsuba).
     pub uv: Option<Box<[Vec2; 3]>>,
+    /// The mesh attribute its material reads (`mesh_attribute`), at its vertices (a face
+    /// attribute three times), if it reads one.
+    pub attr: Option<Box<[Vec3A; 3]>>,
     /// Shape index.
     pub shape: u32,
     /// Whether the shape's normals are flipped (`flip_normals`).
@@ -54,6 +57,14 @@ impl Triangle {
         (t > 0.0 && t < t_max).then_some((t, b1, b2))
     }
 
+    /// The mesh attribute at barycentric coordinates (b1, b2); zero if it has none.
+    #[inline]
+    pub fn attr_at(&self, b1: f32, b2: f32) -> Vec3A {
+        self.attr
+            .as_ref()
+            .map_or(Vec3A::ZERO, |a| (1.0 - b1 - b2) * a[0] + b1 * a[1] + b2 * a[2])
+    }
+
     /// The surface at barycentric coordinates (b1, b2).
     pub fn surface(&self, b1: f32, b2: f32) -> SurfacePoint {
         let b0 = 1.0 - b1 - b2;
@@ -81,6 +92,7 @@ impl Triangle {
             Some(t) => (b0 * t[0] + b1 * t[1] + b2 * t[2], self.tangents(t)),
             None => (Vec2::new(b1, b2), (p1 - p0, p2 - p0)),
         };
+        let attr = self.attr_at(b1, b2);
         SurfacePoint {
             p,
             p_err,
@@ -88,6 +100,7 @@ impl Triangle {
             ns,
             shape: self.shape,
             uv,
+            attr,
             dpdu,
             dpdv,
         }
@@ -128,6 +141,7 @@ mod tests {
             ],
             n: None,
             uv: None,
+            attr: None,
             shape: 0,
             flip: false,
         }

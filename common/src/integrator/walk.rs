@@ -101,6 +101,7 @@ impl<'s> Hit<'s> {
     pub fn at(&self) -> SurfaceAt {
         SurfaceAt {
             uv: self.sp.uv,
+            attr: self.sp.attr,
             frame: self.frame,
             dpdu: self.sp.dpdu,
             dpdv: self.sp.dpdv,
@@ -217,7 +218,7 @@ impl Walk {
             let shape = &scene.shapes[sp.shape as usize];
             let bsdf = &scene.bsdfs[shape.bsdf as usize];
             if bsdf.is_null() {
-                self.beta *= bsdf.null_transmission(sp.uv);
+                self.beta *= bsdf.null_transmission(sp.tex());
                 match scene.cross_boundary(&sp, self.ray.d, self.medium, &mut self.crossings) {
                     Some((next, entered)) => (self.ray, self.medium) = (next, entered),
                     None => return Event::Gone,

@@ -50,7 +50,7 @@ impl SpotLight {
         };
         let d = d.normalize_or_zero();
         let scale = 0.5 / (d.z * libm::tanf(self.cutoff));
-        t.eval(Vec2::new(0.5 + d.x * scale, 0.5 + d.y * scale))
+        t.eval(Vec2::new(0.5 + d.x * scale, 0.5 + d.y * scale).into())
     }
 
     pub(super) fn sample_li(&self, p: Vec3A) -> Option<LightSample> {

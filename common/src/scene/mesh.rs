@@ -15,6 +15,35 @@ pub(crate) struct Mesh {
     /// Per-vertex texture coordinates, if the mesh has them.
     pub uvs: Option<Vec<Vec2>>,
     pub triangles: Vec<[u32; 3]>,
+    /// The file's other vertex and face properties, as Mitsuba names them (`vertex_color`,
+    /// `face_weight`, …), for `mesh_attribute` textures.
+    pub attributes: Vec<Attribute>,
+}
+
+/// A mesh attribute of one or three channels (one is kept in all three).
+#[derive(Clone, Debug)]
+pub(crate) struct Attribute {
+    /// `vertex_…` or `face_…`.
+    pub name: String,
+    /// One value per vertex, or per triangle for a face attribute (a polygon's value repeated
+    /// for each triangle of its fan).
+    pub values: Vec<Vec3A>,
+}
+
+impl Attribute {
+    /// Whether it is given per face (per triangle) rather than per vertex.
+    pub fn per_face(&self) -> bool {
+        self.name.starts_with("face_")
+    }
+
+    /// Its values at the corners of triangle `i`, `t` (a face attribute's three times).
+    pub fn corners(&self, i: usize, t: &[u32; 3]) -> [Vec3A; 3] {
+        if self.per_face() {
+            [self.values[i]; 3]
+        } else {
+            t.map(|v| self.values[v as usize])
+        }
+    }
 }
 
 impl Mesh {
@@ -91,6 +120,23 @@ impl Mesh {
                 return Err("a texture coordinate is not finite".into());
             }
         }
+        for a in &self.attributes {
+            let n = if a.per_face() {
+                self.triangles.len()
+            } else {
+                self.positions.len()
+            };
+            if a.values.len() != n {
+                return Err(format!(
+                    "attribute {} has {} values for {n} elements",
+                    a.name,
+                    a.values.len()
+                ));
+            }
+            if a.values.iter().any(|v| !v.is_finite()) {
+                return Err(format!("a value of attribute {} is not finite", a.name));
+            }
+        }
         Ok(())
     }
 
@@ -119,6 +165,7 @@ pub(crate) fn rectangle() -> Mesh {
             Vec2::new(0.0, 1.0),
         ]),
         triangles: vec![[0, 1, 2], [0, 2, 3]],
+        attributes: Vec::new(),
     }
 }
 
@@ -241,7 +288,7 @@ pub(crate) fn load_obj(path: &Path) -> Result<Mesh, String> {
 }
 
 /// A PLY file (ASCII or binary): vertices with x, y, z and optional nx, ny, nz; polygonal faces
-/// are split into fans.
+/// are split into fans. Other vertex and face properties become [`Attribute`]s.
 pub(crate) fn load_ply(path: &Path) -> Result<Mesh, String> {
     use ply_rs_bw::parser::Parser;
     use ply_rs_bw::ply::{DefaultElement, Property};
@@ -280,17 +327,147 @@ pub(crate) fn load_ply(path: &Path) -> Result<Mesh, String> {
     if uvs.len() == mesh.positions.len() && !uvs.is_empty() {
         mesh.uvs = Some(uvs);
     }
+    // How many triangles each face became, for its attributes.
+    let mut face_fans = Vec::new();
     for f in ply.payload.get("face").map(Vec::as_slice).unwrap_or_default() {
         let idx = f
             .get("vertex_indices")
             .or_else(|| f.get("vertex_index"))
             .and_then(Property::to_u32_list)
             .ok_or("a PLY face lacks a vertex_indices list")?;
+        let before = mesh.triangles.len();
         for i in 1..idx.len().saturating_sub(1) {
             mesh.triangles.push([idx[0], idx[i], idx[i + 1]]);
         }
+        face_fans.push(mesh.triangles.len() - before);
+    }
+    for (element, prefix, fans) in [("vertex", "vertex_", None), ("face", "face_", Some(&face_fans))] {
+        let (Some(def), Some(items)) = (ply.header.elements.get(element), ply.payload.get(element)) else {
+            continue;
+        };
+        let names: Vec<&str> = def.properties.keys().map(String::as_str).collect();
+        for (name, channels) in attribute_groups(&names) {
+            let values = items.iter().map(|e| {
+                let c: Vec<f32> = channels
+                    .iter()
+                    .map(|k| e.get(*k).map_or(0.0, attribute_value))
+                    .collect();
+                if c.len() == 3 {
+                    Vec3A::new(c[0], c[1], c[2])
+                } else {
+                    Vec3A::splat(c[0])
+                }
+            });
+            let values = match fans {
+                None => values.collect(),
+                Some(fans) => values
+                    .zip(fans.iter())
+                    .flat_map(|(v, &n)| std::iter::repeat_n(v, n))
+                    .collect(),
+            };
+            mesh.attributes.push(Attribute {
+                name: format!("{prefix}{name}"),
+                values,
+            });
+        }
     }
     Ok(mesh)
+}
+
+/// The properties a PLY element has beyond those read as geometry, grouped into attributes as
+/// Mitsuba's PLY loader groups them: `r`, `g`, `b` (or `red`, `green`, `blue`) are `color`
+/// (an alpha beside them is left out); consecutive `name_x name_y name_z` (or `_0 _1 _2`,
+/// `_1 _2 _3`) are `name`, and `name_r name_g name_b` are `name_color`; one such property alone
+/// is an attribute of one channel. As in Mitsuba, a group of two or four, a name without a
+/// one-letter suffix, and a prefix seen before are left out.
+fn attribute_groups<'a>(names: &[&'a str]) -> Vec<(String, Vec<&'a str>)> {
+    const RESERVED: [&str; 19] = [
+        "x",
+        "y",
+        "z",
+        "nx",
+        "ny",
+        "nz",
+        "u",
+        "v",
+        "s",
+        "t",
+        "texture_u",
+        "texture_v",
+        "vertex_indices",
+        "vertex_index",
+        "r",
+        "g",
+        "b",
+        "a",
+        "alpha",
+    ];
+    // Mitsuba's suffix sequences, by the suffix that starts them.
+    const SEQUENCES: [[char; 4]; 4] = [
+        ['x', 'y', 'z', 'w'],
+        ['r', 'g', 'b', 'a'],
+        ['0', '1', '2', '3'],
+        ['1', '2', '3', '4'],
+    ];
+    let mut groups = Vec::new();
+    for colour in [["r", "g", "b"], ["red", "green", "blue"]] {
+        if colour.iter().all(|c| names.contains(c)) {
+            groups.push(("color".to_string(), colour.to_vec()));
+            break;
+        }
+    }
+    let mut seen = std::collections::HashSet::new();
+    // The group being read: its prefix, which sequence, and its members so far.
+    type Open<'a> = Option<(&'a str, usize, Vec<&'a str>)>;
+    fn close<'a>(open: &mut Open<'a>, groups: &mut Vec<(String, Vec<&'a str>)>) {
+        if let Some((prefix, sequence, members)) = open.take()
+            && (members.len() == 1 || members.len() == 3)
+        {
+            let name = if sequence == 1 {
+                format!("{prefix}_color")
+            } else {
+                prefix.to_string()
+            };
+            groups.push((name, members));
+        }
+    }
+    let mut open: Open<'a> = None;
+    for &n in names {
+        if RESERVED.contains(&n) || ["red", "green", "blue"].contains(&n) {
+            continue;
+        }
+        let Some((prefix, suffix)) = n.rsplit_once('_').filter(|(_, s)| s.chars().count() == 1) else {
+            close(&mut open, &mut groups);
+            continue;
+        };
+        let c = suffix.chars().next().expect("one character");
+        if let Some((current, sequence, members)) = &mut open
+            && *current == prefix
+        {
+            if SEQUENCES[*sequence].get(members.len()) == Some(&c) {
+                members.push(n);
+            } else {
+                // A broken sequence: Mitsuba ignores the attribute.
+                open = None;
+            }
+            continue;
+        }
+        close(&mut open, &mut groups);
+        if !seen.insert(prefix) {
+            continue;
+        }
+        if let Some(sequence) = SEQUENCES.iter().position(|s| s[0] == c) {
+            open = Some((prefix, sequence, vec![n]));
+        }
+    }
+    close(&mut open, &mut groups);
+    groups
+}
+
+/// A PLY property's value as an attribute: as it is, integers too (Mitsuba 3.9.1 neither
+/// scales nor decodes 8-bit colours; it warns that they are expected in [0, 1]).
+fn attribute_value(p: &ply_rs_bw::ply::Property) -> f32 {
+    p.to_f32_lossy().unwrap_or(0.0)
 }
 
 /// Mesh `shape_index` of a Mitsuba `serialized` file (format versions 3 and 4): each mesh is a
@@ -391,6 +568,7 @@ pub(crate) fn load_serialized(path: &Path, shape_index: u32) -> Result<Mesh, Str
         normals,
         uvs,
         triangles,
+        attributes: Vec::new(),
     })
 }
 
@@ -427,6 +605,44 @@ impl Cursor<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ply_properties_group_into_attributes_as_in_mitsuba() {
+        let groups = |names: &[&str]| -> Vec<(String, usize)> {
+            attribute_groups(names)
+                .into_iter()
+                .map(|(n, m)| (n, m.len()))
+                .collect()
+        };
+        let g = |v: &[(&str, usize)]| -> Vec<(String, usize)> {
+            v.iter().map(|(n, c)| (n.to_string(), *c)).collect()
+        };
+        // mitsuba-data's sphere_attribute.ply.
+        assert_eq!(
+            groups(&[
+                "x", "y", "z", "nx", "ny", "nz", "u", "v", "color_0", "color_1", "color_2"
+            ]),
+            g(&[("color", 3)])
+        );
+        assert_eq!(
+            groups(&["vertex_indices", "color_0", "color_1", "color_2", "weight_0"]),
+            g(&[("color", 3), ("weight", 1)])
+        );
+        assert_eq!(
+            groups(&["x", "red", "green", "blue", "alpha"]),
+            g(&[("color", 3)])
+        );
+        assert_eq!(
+            groups(&["albedo_r", "albedo_g", "albedo_b"]),
+            g(&[("albedo_color", 3)])
+        );
+        assert_eq!(groups(&["n_1", "n_2", "n_3", "k_x"]), g(&[("n", 3), ("k", 1)]));
+        // Two or four channels, no suffix, a suffix out of sequence: left out.
+        assert_eq!(
+            groups(&["uv_x", "uv_y", "q_0", "q_1", "q_2", "q_3", "lone", "s_x", "s_z"]),
+            g(&[])
+        );
+    }
 
     #[test]
     fn built_in_shapes_have_mitsubas_areas_and_orientation() {

@@ -265,7 +265,7 @@ impl Scene {
             if !bsdf.is_null() {
                 return Rgb::ZERO;
             }
-            tr *= bsdf.null_transmission(surface.uv);
+            tr *= bsdf.null_transmission(surface.tex());
             if let Some(m) = medium {
                 tr *= self.media[m as usize].transmittance(hit.t * len);
             }

@@ -1,4 +1,5 @@
-//! Textures: colours and numbers that vary over a surface, looked up by its (u, v) coordinates.
+//! Textures: colours and numbers that vary over a surface, looked up by its (u, v) coordinates
+//! or, for Mitsuba's `mesh_attribute`, by a value the mesh carries at its vertices or faces.
 //!
 //! A material parameter is a [`Param`]: a fixed value, which costs a scene nothing beyond a
 //! branch, or a texture. Textures are evaluated where a BSDF needs the value, as Mitsuba does,
@@ -19,6 +20,15 @@ use crate::color::{Rgb, luminance};
 pub enum Texture {
     /// An image (Mitsuba's `bitmap`).
     Bitmap(Bitmap),
+    /// A mesh's vertex or face attribute (Mitsuba's `mesh_attribute`), times `scale`. The
+    /// scene builder bakes the named attribute into the triangles of each mesh whose material
+    /// reads it, so a lookup is the interpolated value already in [`TexAt::attr`].
+    Attribute {
+        /// The attribute's name, `vertex_…` or `face_…`.
+        name: String,
+        /// Mitsuba's `scale`.
+        scale: f32,
+    },
     /// Two colours in a 2 × 2 checkerboard over the unit square (Mitsuba's `checkerboard`).
     Checkerboard {
         /// The colour where ⌊2u⌋ + ⌊2v⌋ is even.
@@ -30,11 +40,36 @@ pub enum Texture {
     },
 }
 
+/// Where a texture is looked up: the surface's (u, v), and the value of the mesh attribute its
+/// material reads there (zero where there is none).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TexAt {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// The interpolated mesh attribute (a one-channel attribute in every channel).
+    pub attr: Rgb,
+}
+
+impl From<Vec2> for TexAt {
+    fn from(uv: Vec2) -> TexAt {
+        TexAt { uv, attr: Rgb::ZERO }
+    }
+}
+
+impl From<&TexAt> for TexAt {
+    #[inline]
+    fn from(at: &TexAt) -> TexAt {
+        *at
+    }
+}
+
 impl Texture {
-    /// The colour at `uv`.
-    pub fn eval(&self, uv: Vec2) -> Rgb {
+    /// The colour at `at`.
+    pub fn eval(&self, at: TexAt) -> Rgb {
+        let uv = at.uv;
         match self {
             Texture::Bitmap(b) => b.eval(uv),
+            Texture::Attribute { scale, .. } => at.attr * *scale,
             Texture::Checkerboard {
                 color0,
                 color1,
@@ -52,24 +87,37 @@ impl Texture {
     /// Mitsuba's `eval_1` gives it: a bitmap's luminance; for a checkerboard the mean of the
     /// colour's channels, with the two colours swapped (Mitsuba 3 swaps them in `eval_1`, and
     /// scenes such as its textured carbon fibre are rendered that way).
-    pub fn eval_float(&self, uv: Vec2) -> f32 {
+    /// An attribute gives its first channel: a one-channel attribute's value, as Mitsuba's
+    /// `eval_1` does (Mitsuba refuses a three-channel one there).
+    pub fn eval_float(&self, at: TexAt) -> f32 {
         match self {
-            Texture::Bitmap(b) => luminance(b.eval(uv)),
+            Texture::Bitmap(b) => luminance(b.eval(at.uv)),
+            Texture::Attribute { scale, .. } => at.attr.x * *scale,
             Texture::Checkerboard { color0, color1, .. } => {
-                let first = self.eval(uv) == *color0;
+                let first = self.eval(at) == *color0;
                 crate::color::mean(if first { *color1 } else { *color0 })
             }
         }
     }
 
     /// The mean as Mitsuba's `mean()` gives it (BSDFs choose lobe probabilities from it): a
-    /// bitmap's mean luminance, a checkerboard's mean of its colours' channel means.
+    /// bitmap's mean luminance, a checkerboard's mean of its colours' channel means. Mitsuba
+    /// has none for an attribute, and the scene builder refuses it where a mean is needed.
     pub fn mean(&self) -> f32 {
         match self {
             Texture::Bitmap(b) => luminance(b.mean()),
+            Texture::Attribute { .. } => 0.0,
             Texture::Checkerboard { color0, color1, .. } => {
                 0.5 * (crate::color::mean(*color0) + crate::color::mean(*color1))
             }
+        }
+    }
+
+    /// The mesh attribute this texture reads, if it is one.
+    pub fn attribute(&self) -> Option<&str> {
+        match self {
+            Texture::Attribute { name, .. } => Some(name),
+            _ => None,
         }
     }
 }
@@ -90,12 +138,12 @@ impl<T> From<T> for Param<T> {
 }
 
 impl Param<Rgb> {
-    /// The colour at `uv`.
+    /// The colour at `at` (a [`TexAt`], or just (u, v)).
     #[inline]
-    pub fn at(&self, uv: Vec2) -> Rgb {
+    pub fn at(&self, at: impl Into<TexAt>) -> Rgb {
         match self {
             Param::Fixed(v) => *v,
-            Param::Textured(t) => t.eval(uv),
+            Param::Textured(t) => t.eval(at.into()),
         }
     }
 
@@ -117,12 +165,12 @@ impl Param<Rgb> {
 }
 
 impl Param<f32> {
-    /// The number at `uv`.
+    /// The number at `at` (a [`TexAt`], or just (u, v)).
     #[inline]
-    pub fn at(&self, uv: Vec2) -> f32 {
+    pub fn at(&self, at: impl Into<TexAt>) -> f32 {
         match self {
             Param::Fixed(v) => *v,
-            Param::Textured(t) => t.eval_float(uv),
+            Param::Textured(t) => t.eval_float(at.into()),
         }
     }
 }

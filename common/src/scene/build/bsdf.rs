@@ -23,6 +23,9 @@ impl Builder<'_> {
                 .bsdf_ids
                 .get(id)
                 .ok_or_else(|| self.ctx.err(el, format!("no <bsdf> with id \"{id}\"")))?;
+            if let Some(read) = self.bsdf_attributes.get(&i) {
+                self.attributes_read.extend(read.iter().cloned());
+            }
             return Ok(self.bsdfs[i as usize].clone());
         }
         self.bsdf(el)
@@ -107,9 +110,26 @@ impl Builder<'_> {
                 } else {
                     None
                 };
+                let diffuse = self.color_param(&p, "diffuse_reflectance", Rgb::splat(0.5))?;
+                let specular = self.color_param(&p, "specular_reflectance", Rgb::ONE)?;
+                // Plastic weighs its lobes by the textures' means, which Mitsuba does not
+                // define for an attribute (it fails to load such a scene).
+                for (name, param) in [
+                    ("diffuse_reflectance", &diffuse),
+                    ("specular_reflectance", &specular),
+                ] {
+                    if let Param::Textured(t) = param
+                        && t.attribute().is_some()
+                    {
+                        return Err(p.err_at(
+                            name,
+                            format!("{kind}'s {name} cannot be a mesh_attribute: it needs the texture's mean, which an attribute has not (Mitsuba refuses it too)"),
+                        ));
+                    }
+                }
                 Bsdf::Plastic(Box::new(Plastic::new(
-                    self.color_param(&p, "diffuse_reflectance", Rgb::splat(0.5))?,
-                    self.color_param(&p, "specular_reflectance", Rgb::ONE)?,
+                    diffuse,
+                    specular,
                     self.relative_ior(&p, "polypropylene")?,
                     p.boolean("nonlinear")?.unwrap_or(false),
                     roughness,

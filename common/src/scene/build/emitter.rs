@@ -49,7 +49,7 @@ impl Builder<'_> {
                     intensity: p.emission("intensity", Rgb::ONE)?,
                     cutoff: cutoff.to_radians(),
                     beam_width: beam.to_radians(),
-                    texture: self.texture_param(&p, "texture")?,
+                    texture: self.light_texture(&p, "texture")?,
                 })
             }
             "projector" => {
@@ -57,7 +57,7 @@ impl Builder<'_> {
                     &p,
                     "a projector's to_world places and turns it; set its spread with fov",
                 )?;
-                let irradiance = match self.texture_param(&p, "irradiance")? {
+                let irradiance = match self.light_texture(&p, "irradiance")? {
                     Some(t) => Param::Textured(t),
                     None => match p.tag_of("irradiance") {
                         Some(_) => Param::Fixed(p.emission("irradiance", Rgb::ONE)?),

@@ -102,6 +102,11 @@ struct Builder<'a> {
     area_taken: std::collections::HashSet<String>,
     /// Shape groups, by id: their trees, which instances place.
     groups: HashMap<String, Arc<Bvh>>,
+    /// The mesh attributes (`mesh_attribute` textures) read by the materials built so far and
+    /// not yet claimed by a shape, which bakes them into its triangles.
+    attributes_read: Vec<String>,
+    /// Those each top-level BSDF reads, by index, for the shapes that refer to it.
+    bsdf_attributes: HashMap<u32, Vec<String>>,
 }
 
 /// Whether `el` is a `<shape type="shapegroup">`.
@@ -131,6 +136,8 @@ impl<'a> Builder<'a> {
             area_ids: Default::default(),
             area_taken: Default::default(),
             groups: HashMap::new(),
+            attributes_read: Vec::new(),
+            bsdf_attributes: HashMap::new(),
         }
     }
 
@@ -170,6 +177,10 @@ impl<'a> Builder<'a> {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
+            let read = std::mem::take(&mut self.attributes_read);
+            if !read.is_empty() {
+                self.bsdf_attributes.insert(index, read);
+            }
             if let Some(id) = el.attr("id")
                 && (self.bsdf_ids.insert(id.to_string(), index).is_some()
                     || self.medium_ids.contains_key(id)

@@ -9,7 +9,7 @@ use crate::bsdf::{Bsdf, Diffuse};
 use crate::color::Rgb;
 use crate::geometry::{Bvh, Cylinder, Instance, Primitive, Sphere, Triangle};
 use crate::scene::ShapeInfo;
-use crate::scene::mesh::{self, Mesh};
+use crate::scene::mesh::{self, Attribute, Mesh};
 use crate::scene::props::{Props, Res};
 use crate::scene::xml::Element;
 use crate::texture::Param;
@@ -137,7 +137,7 @@ impl Builder<'_> {
                 ));
             }
         };
-        if let Some(mesh) = mesh {
+        let mesh = mesh.map(|mesh| {
             let mut mesh = mesh.transformed(&to_world);
             // Mitsuba's rectangle and disk are analytic: their front is the transformed normal
             // (the inverse transpose of to_world applied to +z), not the transformed edges'
@@ -153,11 +153,49 @@ impl Builder<'_> {
             if is_file && mesh.normals.is_none() && !face_normals {
                 mesh.recompute_vertex_normals();
             }
-            self.push_mesh(mesh, index, flip);
-        }
+            mesh
+        });
 
         let (interior, exterior, _) = self.media_of(&p, true)?;
+        let read_before = self.attributes_read.len();
         let nested = self.nested_bsdfs(&p)?;
+        let mut read: Vec<String> = self.attributes_read.drain(read_before..).collect();
+        read.sort();
+        read.dedup();
+        let attribute = match (read.as_slice(), &mesh) {
+            ([], _) => None,
+            ([name], Some(mesh)) => Some(
+                mesh.attributes
+                    .iter()
+                    .find(|a| a.name == *name)
+                    .ok_or_else(|| {
+                        let has: Vec<&str> = mesh.attributes.iter().map(|a| a.name.as_str()).collect();
+                        self.ctx.err(
+                            el,
+                            format!(
+                                "its material reads mesh attribute \"{name}\", which the mesh has not (it has: {})",
+                                if has.is_empty() { "none".to_string() } else { has.join(", ") }
+                            ),
+                        )
+                    })?
+                    .clone(),
+            ),
+            ([name], None) => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("its material reads mesh attribute \"{name}\", and a {kind} is not a mesh with attributes"),
+                ));
+            }
+            _ => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("its material reads mesh attributes {}: one per shape is supported", read.join(", ")),
+                ));
+            }
+        };
+        if let Some(mesh) = mesh {
+            self.push_mesh(mesh, index, flip, attribute.as_ref());
+        }
         let referred: Vec<&Element> = p
             .objects("ref")
             .into_iter()
@@ -195,7 +233,7 @@ impl Builder<'_> {
             if ep.kind()? != "area" {
                 return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
             }
-            let radiance = match self.texture_param(&ep, "radiance")? {
+            let radiance = match self.light_texture(&ep, "radiance")? {
                 Some(t) => Param::Textured(t),
                 None => Param::Fixed(ep.emission("radiance", Rgb::ONE)?),
             };
@@ -271,8 +309,9 @@ impl Builder<'_> {
         Ok(())
     }
 
-    pub(super) fn push_mesh(&mut self, mesh: Mesh, shape: u32, flip: bool) {
-        for t in &mesh.triangles {
+    /// Adds a mesh's triangles, with the values of `attribute` (the one its material reads).
+    pub(super) fn push_mesh(&mut self, mesh: Mesh, shape: u32, flip: bool, attribute: Option<&Attribute>) {
+        for (i, t) in mesh.triangles.iter().enumerate() {
             let p = t.map(|i| mesh.positions[i as usize]);
             // Degenerate triangles can never be hit and would only divide by zero elsewhere.
             if (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0 {
@@ -283,10 +322,12 @@ impl Builder<'_> {
                 .as_ref()
                 .map(|ns| Box::new(t.map(|i| ns[i as usize])));
             let uv = mesh.uvs.as_ref().map(|uvs| Box::new(t.map(|i| uvs[i as usize])));
+            let attr = attribute.map(|a| Box::new(a.corners(i, t)));
             self.prims.push(Primitive::Triangle(Triangle {
                 p,
                 n,
                 uv,
+                attr,
                 shape,
                 flip,
             }));

@@ -14,20 +14,35 @@ use super::Builder;
 impl Builder<'_> {
     /// A texture given for parameter `name`: nested (`<texture name=...>`) or a `<ref>` to a
     /// top-level one.
+    /// A mesh attribute's name is noted for the shape that will carry the material.
     pub(super) fn texture_param(&mut self, p: &Props, name: &str) -> Res<Option<Arc<Texture>>> {
-        if let Some(el) = p.named_object("texture", name) {
-            return Ok(Some(Arc::new(self.texture(el)?)));
-        }
-        if let Some(el) = p.named_object("ref", name) {
+        let texture = if let Some(el) = p.named_object("texture", name) {
+            Arc::new(self.texture(el)?)
+        } else if let Some(el) = p.named_object("ref", name) {
             let id = el
                 .attr("id")
                 .ok_or_else(|| self.ctx.err(el, "a <ref> needs an id"))?;
-            return match self.texture_ids.get(id) {
-                Some(t) => Ok(Some(t.clone())),
-                None => Err(self.ctx.err(el, format!("no <texture> with id \"{id}\""))),
-            };
+            match self.texture_ids.get(id) {
+                Some(t) => t.clone(),
+                None => return Err(self.ctx.err(el, format!("no <texture> with id \"{id}\""))),
+            }
+        } else {
+            return Ok(None);
+        };
+        if let Some(attribute) = texture.attribute() {
+            self.attributes_read.push(attribute.to_string());
         }
-        Ok(None)
+        Ok(Some(texture))
+    }
+
+    /// A texture given to a light: never a mesh attribute, as a light has no mesh to read it
+    /// from and is chosen by its texture's mean (Mitsuba has none for an attribute either).
+    pub(super) fn light_texture(&mut self, p: &Props, name: &str) -> Res<Option<Arc<Texture>>> {
+        let texture = self.texture_param(p, name)?;
+        if texture.as_ref().is_some_and(|t| t.attribute().is_some()) {
+            return Err(p.err_at(name, format!("a light's {name} cannot be a mesh_attribute")));
+        }
+        Ok(texture)
     }
 
     /// A colour parameter of a material: a texture, or a reflectance in [0, 1].
@@ -46,7 +61,7 @@ impl Builder<'_> {
         }
     }
 
-    /// A `<texture>`: Mitsuba's `bitmap` or `checkerboard`.
+    /// A `<texture>`: Mitsuba's `bitmap`, `checkerboard` or `mesh_attribute`.
     pub(super) fn texture(&mut self, el: &Element) -> Res<Texture> {
         let p = Props::new(self.ctx, el)?;
         let to_uv = match p.transform("to_uv")? {
@@ -87,6 +102,22 @@ impl Builder<'_> {
                     .map_err(|e| p.err_at("filename", format!("{}: {e}", path.display())))?;
                 Texture::Bitmap(bitmap)
             }
+            "mesh_attribute" => {
+                let name = p.string("name")?.ok_or_else(|| {
+                    self.ctx
+                        .err(el, "missing the name parameter (vertex_… or face_…)")
+                })?;
+                if !(name.starts_with("vertex_") || name.starts_with("face_")) {
+                    return Err(p.err_at(
+                        "name",
+                        format!("a mesh attribute's name starts with vertex_ or face_, not \"{name}\""),
+                    ));
+                }
+                Texture::Attribute {
+                    name: name.to_string(),
+                    scale: p.float("scale")?.unwrap_or(1.0),
+                }
+            }
             "checkerboard" => Texture::Checkerboard {
                 color0: p.reflectance("color0", Rgb::splat(0.4))?,
                 color1: p.reflectance("color1", Rgb::splat(0.2))?,
@@ -95,7 +126,9 @@ impl Builder<'_> {
             other => {
                 return Err(self.ctx.err(
                     el,
-                    format!("texture type \"{other}\" is not supported (bitmap, checkerboard)"),
+                    format!(
+                        "texture type \"{other}\" is not supported (bitmap, checkerboard, mesh_attribute)"
+                    ),
                 ));
             }
         };
