@@ -442,16 +442,8 @@ fn textured_reflectance(
             continue;
         };
         let (b1, b2) = (b1.0[i], b2.0[i]);
-        let uv = match &t.uv {
-            Some(tc) => (1.0 - b1 - b2) * tc[0] + b1 * tc[1] + b2 * tc[2],
-            None => glam::Vec2::new(b1, b2),
-        };
         let (front, behind) = &ds.textures[k as usize];
-        let at = crate::texture::TexAt {
-            uv,
-            attr: t.attr_at(b1, b2),
-        };
-        let c = if back.get(i) { behind } else { front }.at(at);
+        let c = if back.get(i) { behind } else { front }.at(t.tex_at(b1, b2));
         (refl.x.0[i], refl.y.0[i], refl.z.0[i]) = (c.x, c.y, c.z);
     }
 }

@@ -1,6 +1,7 @@
 use glam::{Vec2, Vec3A};
 
 use super::{Aabb, Ray, SurfacePoint, gamma};
+use crate::texture::TexAt;
 
 /// A triangle with its vertices in world space.
 #[derive(Clone, Debug)]
@@ -57,12 +58,22 @@ impl Triangle {
         (t > 0.0 && t < t_max).then_some((t, b1, b2))
     }
 
-    /// The mesh attribute at barycentric coordinates (b1, b2); zero if it has none.
+    /// Where textures are looked up at barycentric coordinates (b1, b2): the interpolated
+    /// texture coordinates (or (b1, b2) without them) and mesh attribute (zero without one).
+    /// The lane engine reads its textures here too.
     #[inline]
-    pub fn attr_at(&self, b1: f32, b2: f32) -> Vec3A {
-        self.attr
-            .as_ref()
-            .map_or(Vec3A::ZERO, |a| (1.0 - b1 - b2) * a[0] + b1 * a[1] + b2 * a[2])
+    pub fn tex_at(&self, b1: f32, b2: f32) -> TexAt {
+        let b0 = 1.0 - b1 - b2;
+        TexAt {
+            uv: self
+                .uv
+                .as_ref()
+                .map_or(Vec2::new(b1, b2), |t| b0 * t[0] + b1 * t[1] + b2 * t[2]),
+            attr: self
+                .attr
+                .as_ref()
+                .map_or(Vec3A::ZERO, |a| b0 * a[0] + b1 * a[1] + b2 * a[2]),
+        }
     }
 
     /// The surface at barycentric coordinates (b1, b2).
@@ -88,11 +99,11 @@ impl Triangle {
             }
             None => ng,
         };
-        let (uv, (dpdu, dpdv)) = match &self.uv {
-            Some(t) => (b0 * t[0] + b1 * t[1] + b2 * t[2], self.tangents(t)),
-            None => (Vec2::new(b1, b2), (p1 - p0, p2 - p0)),
+        let (dpdu, dpdv) = match &self.uv {
+            Some(t) => self.tangents(t),
+            None => (p1 - p0, p2 - p0),
         };
-        let attr = self.attr_at(b1, b2);
+        let TexAt { uv, attr } = self.tex_at(b1, b2);
         SurfacePoint {
             p,
             p_err,

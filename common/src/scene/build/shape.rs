@@ -162,12 +162,12 @@ impl Builder<'_> {
         let mut read: Vec<String> = self.attributes_read.drain(read_before..).collect();
         read.sort();
         read.dedup();
-        let attribute = match (read.as_slice(), &mesh) {
+        let attribute_index = match (read.as_slice(), &mesh) {
             ([], _) => None,
             ([name], Some(mesh)) => Some(
                 mesh.attributes
                     .iter()
-                    .find(|a| a.name == *name)
+                    .position(|a| a.name == *name)
                     .ok_or_else(|| {
                         let has: Vec<&str> = mesh.attributes.iter().map(|a| a.name.as_str()).collect();
                         self.ctx.err(
@@ -177,8 +177,7 @@ impl Builder<'_> {
                                 if has.is_empty() { "none".to_string() } else { has.join(", ") }
                             ),
                         )
-                    })?
-                    .clone(),
+                    })?,
             ),
             ([name], None) => {
                 return Err(self.ctx.err(
@@ -193,7 +192,9 @@ impl Builder<'_> {
                 ));
             }
         };
-        if let Some(mesh) = mesh {
+        if let Some(mut mesh) = mesh {
+            // Taken out of the mesh, not copied: the triangles keep their own corners of it.
+            let attribute = attribute_index.map(|i| mesh.attributes.swap_remove(i));
             self.push_mesh(mesh, index, flip, attribute.as_ref());
         }
         let referred: Vec<&Element> = p

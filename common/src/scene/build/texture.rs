@@ -13,8 +13,7 @@ use super::Builder;
 
 impl Builder<'_> {
     /// A texture given for parameter `name`: nested (`<texture name=...>`) or a `<ref>` to a
-    /// top-level one.
-    /// A mesh attribute's name is noted for the shape that will carry the material.
+    /// top-level one. A mesh attribute's name is noted for the shape that will carry the material.
     pub(super) fn texture_param(&mut self, p: &Props, name: &str) -> Res<Option<Arc<Texture>>> {
         let texture = if let Some(el) = p.named_object("texture", name) {
             Arc::new(self.texture(el)?)
