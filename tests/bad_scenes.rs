@@ -407,9 +407,34 @@ fn bad_media() {
         "g must lie strictly between -1 and 1",
     );
     expect_error(
-        &scene_text("<medium type=\"heterogeneous\" id=\"m\"/>", FILM),
+        &scene_text("<medium type=\"inhomogeneous\" id=\"m\"/>", FILM),
         8,
-        "only homogeneous media",
+        "medium type \"inhomogeneous\" is not supported (homogeneous, heterogeneous)",
+    );
+    let grid = |medium: &str, volume: &str| {
+        format!("<medium type=\"{medium}\" id=\"m\"><volume name=\"sigma_t\" {volume}</volume></medium>")
+    };
+    expect_error(
+        &scene_text(&grid("homogeneous", "type=\"constvolume\">"), FILM),
+        8,
+        "a homogeneous medium's sigma_t is a constant; a medium whose density varies is type=\"heterogeneous\"",
+    );
+    expect_error(
+        &scene_text(&grid("heterogeneous", "type=\"noisevolume\">"), FILM),
+        8,
+        "volume type \"noisevolume\" is not supported (gridvolume, constvolume)",
+    );
+    // A file that is not a .vol file, and one that does not exist.
+    let file = |name: &str| format!("type=\"gridvolume\"><string name=\"filename\" value=\"{name}\"/>");
+    expect_error(
+        &scene_text(&grid("heterogeneous", &file("inside.obj")), FILM),
+        8,
+        "not a Mitsuba volume file",
+    );
+    expect_error(
+        &scene_text(&grid("heterogeneous", &file("smoke.vol")), FILM),
+        8,
+        "smoke.vol",
     );
     expect_error(
         &scene_text(

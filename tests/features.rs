@@ -156,3 +156,12 @@ fn mesh_attributes_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("mesh-attributes");
     photonfarm_tests::check_sppm_convergence("mesh-attributes");
 }
+
+/// Delta tracking and ratio tracking through a chromatic density grid with an albedo grid, under
+/// an area light and a point light (sampled equiangularly, weighted by ratio tracking), beside
+/// homogeneous fog with a repeated albedo grid; SPPM with the point estimate, its default here.
+#[test]
+fn heterogeneous_media_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("heterogeneous");
+    photonfarm_tests::check_sppm_convergence("heterogeneous");
+}

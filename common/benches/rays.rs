@@ -48,7 +48,7 @@ fn ray_mix(scene: &Scene, pass: u64) -> (u64, u64) {
             let _ = scene.intersect(&Scene::spawn_ray(&sp, w));
             total += 1;
             if let Some((_, ls)) = scene.sample_light(sp.p, s.next_1d(), s.next_2d()) {
-                let _ = scene.unoccluded(&sp, &ls);
+                let _ = scene.transmittance(&sp, &ls, None, &mut s);
                 total += 1;
             }
         }

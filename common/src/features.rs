@@ -252,9 +252,9 @@ pub(crate) fn sample(scene: &Scene, ray: Ray, sampler: &mut Sampler) -> Sample {
                 };
             }
             // Fog: the medium's albedo, and the normal of a surface facing the ray.
-            Event::Medium { medium, .. } => {
+            Event::Medium { p, medium, .. } => {
                 return Sample {
-                    albedo: clamp01(walk.beta * scene.media[medium as usize].albedo),
+                    albedo: clamp01(walk.beta * scene.media[medium as usize].albedo_at(p)),
                     normal: encode(-walk.ray.d),
                     ..Sample::NONE
                 };

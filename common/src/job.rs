@@ -253,6 +253,7 @@ impl JobSettings {
                 }
                 s.volume_radius_ratio = self.volume_radius_ratio.unwrap_or(s.volume_radius_ratio);
                 s.validate()?;
+                s.validate_for(scene)?;
                 let declared = match &scene.integrator.params {
                     MethodParams::Sppm(p) => p.iterations.map(declared_iterations).transpose()?,
                     _ => None,
@@ -305,6 +306,45 @@ mod tests {
             );
         }
         assert_eq!(Integrator::from_name("volpath"), None);
+    }
+
+    /// A heterogeneous medium gets SPPM's point estimate; the beam estimates, which integrate
+    /// uniform media in closed form, are refused for it with a message saying what to use.
+    #[test]
+    fn media_that_vary_take_the_point_estimate() {
+        let scene = Scene::from_str(
+            r#"<scene version="3.0.0">
+            <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
+                <integer name="height" value="4"/><rfilter type="box"/></film></sensor>
+            <medium type="heterogeneous" id="m"><float name="sigma_t" value="2"/></medium>
+            <shape type="cube"><bsdf type="null"/><ref name="interior" id="m"/></shape>
+            <shape type="sphere"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+            </scene>"#,
+            Path::new("t.xml"),
+            &[],
+        )
+        .unwrap();
+        let sppm = |estimate| JobSettings {
+            integrator: Some(Integrator::Sppm),
+            volume_estimate: estimate,
+            ..JobSettings::default()
+        };
+        let resolved = sppm(None).resolve(&scene, false).unwrap();
+        let Method::Sppm(s) = resolved.render.method else {
+            panic!("not SPPM");
+        };
+        assert_eq!(s.volume_estimate, VolumeEstimate::Point);
+        for estimate in [VolumeEstimate::Beam, VolumeEstimate::PhotonBeams] {
+            let e = sppm(Some(estimate))
+                .resolve(&scene, false)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("use the point estimate (--volume-estimate point"),
+                "{e}"
+            );
+        }
+        assert!(sppm(Some(VolumeEstimate::Point)).resolve(&scene, false).is_ok());
     }
 
     #[test]

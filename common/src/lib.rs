@@ -29,3 +29,4 @@ pub mod sampling;
 pub mod scene;
 pub mod sobol;
 pub mod texture;
+pub mod volume;

@@ -1,16 +1,22 @@
-//! Homogeneous participating media and their phase functions.
+//! Participating media and their phase functions.
 //!
-//! Free-flight distances are sampled from the channel-averaged density
+//! Free-flight distances in a homogeneous medium are sampled from the channel-averaged density
 //! p(t) = mean_c σt_c exp(−σt_c t), as Mitsuba's RGB volumetric path tracer does, so that a
 //! chromatic medium stays unbiased in every channel: the caller multiplies its throughput by the
 //! returned per-channel weight.
+//!
+//! A heterogeneous medium (σt from a grid) is sampled by delta tracking against a majorant and
+//! its transmittance estimated by ratio tracking, both unbiased; only such a medium draws the
+//! random numbers they need, so scenes without one render the same bytes as before.
 
 use std::f32::consts::PI;
 
 use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
-use crate::geometry::Frame;
+use crate::geometry::{Frame, Ray};
+use crate::sampling::Sampler;
+use crate::volume::GridVolume;
 
 /// A phase function.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,16 +60,47 @@ impl Phase {
     }
 }
 
-/// A homogeneous medium.
+/// A medium.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Medium {
-    /// Extinction coefficient per unit length (after Mitsuba's `scale`).
+    /// Extinction coefficient per unit length (after Mitsuba's `scale`). In a heterogeneous
+    /// medium, the majorant in every channel: read σt through [`Medium::sigma_t_at`].
     pub sigma_t: Rgb,
-    /// Single-scattering albedo σs / σt.
+    /// Single-scattering albedo σs / σt, where no grid gives it: read it through
+    /// [`Medium::albedo_at`].
     pub albedo: Rgb,
     /// The phase function.
     pub phase: Phase,
+    /// What varies in space; None for the common homogeneous medium of constant albedo.
+    pub grids: Option<Box<Grids>>,
 }
+
+/// The parts of a medium given by grids.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grids {
+    /// Mitsuba's `heterogeneous`: σt from a grid.
+    pub density: Option<Density>,
+    /// The albedo from a grid (in a homogeneous or a heterogeneous medium).
+    pub albedo: Option<GridVolume>,
+}
+
+/// σt = scale · grid inside the grid's box, zero outside it (Mitsuba samples collisions only
+/// within the box).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Density {
+    /// The grid.
+    pub grid: GridVolume,
+    /// Mitsuba's `scale`.
+    pub scale: f32,
+    /// A bound on σt in every channel (scale times the grid's maximum, or Mitsuba's
+    /// `max_value`): the rate of tentative collisions in delta and ratio tracking.
+    pub majorant: f32,
+}
+
+/// Tentative collisions one flight or one transmittance estimate may take: a majorant times
+/// length of a million. Beyond it the light is taken as absorbed, which nothing but a medium of
+/// absurd density reaches, and which ends the walk instead of hanging it.
+const MAX_TENTATIVE: u32 = 1 << 20;
 
 /// Where a free flight ended.
 #[derive(Clone, Copy, Debug)]
@@ -85,6 +122,71 @@ pub enum Flight {
 }
 
 impl Medium {
+    /// A homogeneous medium of constant albedo.
+    pub fn homogeneous(sigma_t: Rgb, albedo: Rgb, phase: Phase) -> Medium {
+        Medium {
+            sigma_t,
+            albedo,
+            phase,
+            grids: None,
+        }
+    }
+
+    /// The density grid, for a heterogeneous medium.
+    fn density(&self) -> Option<&Density> {
+        self.grids.as_ref()?.density.as_ref()
+    }
+
+    /// Whether σt and the albedo are the same everywhere: what the closed forms of the beam
+    /// estimates (SPPM's `beam` and `photon-beams`) need.
+    pub fn is_uniform(&self) -> bool {
+        self.grids.is_none()
+    }
+
+    /// Single-scattering albedo at `p`.
+    pub fn albedo_at(&self, p: Vec3A) -> Rgb {
+        match self.grids.as_ref().and_then(|g| g.albedo.as_ref()) {
+            Some(grid) => grid.eval(p),
+            None => self.albedo,
+        }
+    }
+
+    /// Extinction at `p`.
+    pub fn sigma_t_at(&self, p: Vec3A) -> Rgb {
+        match self.density() {
+            None => self.sigma_t,
+            Some(d) => d.sigma_t_at(p),
+        }
+    }
+
+    /// Samples a free flight along `ray` (unit direction) with a surface (or nothing) at
+    /// `t_max`: closed-form in a homogeneous medium (two random numbers), by delta tracking in a
+    /// heterogeneous one.
+    pub fn sample_flight_along(&self, ray: &Ray, t_max: f32, sampler: &mut Sampler) -> Flight {
+        match self.density() {
+            None => self.sample_flight(t_max, sampler.next_1d(), sampler.next_1d()),
+            Some(d) => d.delta_tracking(ray, t_max, sampler),
+        }
+    }
+
+    /// Transmittance along `ray.at(0..t_max)` (unit direction): exact in a homogeneous medium
+    /// (no random numbers), an unbiased ratio-tracking estimate in a heterogeneous one.
+    pub fn transmittance_along(&self, ray: &Ray, t_max: f32, sampler: &mut Sampler) -> Rgb {
+        match self.density() {
+            None => self.transmittance(t_max),
+            Some(d) => d.ratio_tracking(ray, t_max, sampler),
+        }
+    }
+
+    /// σt · Tr at `ray.at(t)` from the ray's origin (unit direction): what a collision drawn
+    /// by some other density than the flight's (equiangularly about a light) is weighted by.
+    pub fn collision_weight(&self, ray: &Ray, t: f32, sampler: &mut Sampler) -> Rgb {
+        match self.density() {
+            None => self.sigma_t * self.transmittance(t),
+            Some(d) => d.sigma_t_at(ray.at(t)) * d.ratio_tracking(ray, t, sampler),
+        }
+    }
+
     /// Transmittance over a distance.
     pub fn transmittance(&self, dist: f32) -> Rgb {
         if !dist.is_finite() {
@@ -173,6 +275,69 @@ impl Medium {
     }
 }
 
+impl Density {
+    /// σt at `p`.
+    pub fn sigma_t_at(&self, p: Vec3A) -> Rgb {
+        let b = self.grid.bbox();
+        if p.cmplt(b.min).any() || p.cmpgt(b.max).any() {
+            return Rgb::ZERO;
+        }
+        self.grid.eval(p) * self.scale
+    }
+
+    /// Delta tracking against the majorant μ, over the part of the ray inside the grid's box.
+    /// At each tentative collision the event is real with probability mean(σt)/μ and null
+    /// otherwise, and the throughput takes the ratio of each channel's probability to that:
+    /// σt/mean(σt) for a real one, (μ − σt)/(μ − mean(σt)) for a null one. Unbiased in every
+    /// channel of a chromatic medium without picking a channel (a grey medium's weights are 1).
+    fn delta_tracking(&self, ray: &Ray, t_max: f32, sampler: &mut Sampler) -> Flight {
+        let mu = self.majorant;
+        let Some((mut t, end)) = self.grid.bbox().clip(ray, t_max).filter(|_| mu > 0.0) else {
+            return Flight::Passed { weight: Rgb::ONE };
+        };
+        let mut weight = Rgb::ONE;
+        for _ in 0..MAX_TENTATIVE {
+            t -= libm::log1pf(-sampler.next_1d()) / mu;
+            if t >= end {
+                return Flight::Passed { weight };
+            }
+            let s = self.sigma_t_at(ray.at(t));
+            let mean = (s.x + s.y + s.z) * (1.0 / 3.0);
+            if sampler.next_1d() * mu < mean {
+                return Flight::Collision {
+                    t,
+                    weight: weight * s / mean,
+                };
+            }
+            if mean > 0.0 {
+                weight *= (Rgb::splat(mu) - s) / (mu - mean);
+            }
+        }
+        Flight::Passed { weight: Rgb::ZERO }
+    }
+
+    /// Ratio tracking: the product of (1 − σt/μ) over the tentative collisions, an unbiased
+    /// estimate of the transmittance in every channel.
+    fn ratio_tracking(&self, ray: &Ray, t_max: f32, sampler: &mut Sampler) -> Rgb {
+        let mu = self.majorant;
+        let Some((mut t, end)) = self.grid.bbox().clip(ray, t_max).filter(|_| mu > 0.0) else {
+            return Rgb::ONE;
+        };
+        let mut tr = Rgb::ONE;
+        for _ in 0..MAX_TENTATIVE {
+            t -= libm::log1pf(-sampler.next_1d()) / mu;
+            if t >= end {
+                return tr;
+            }
+            tr *= (Rgb::ONE - self.sigma_t_at(ray.at(t)) / mu).max(Rgb::ZERO);
+            if tr == Rgb::ZERO {
+                return tr;
+            }
+        }
+        Rgb::ZERO
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -216,11 +381,7 @@ mod tests {
     fn collisions_within_a_segment_are_unbiased_per_channel() {
         // E[weight · g(t)] = ∫₀^T Tr σt g dt, with g(t) = t, on a finite and an infinite
         // segment; and the transmittance integral against the closed form.
-        let m = Medium {
-            sigma_t: Rgb::new(0.0, 1.0, 3.0),
-            albedo: Rgb::ONE,
-            phase: Phase::Isotropic,
-        };
+        let m = Medium::homogeneous(Rgb::new(0.0, 1.0, 3.0), Rgb::ONE, Phase::Isotropic);
         let mut s = Sampler::new(3, Stream::Photon, 0, 0);
         let n = 400_000;
         for t_max in [0.7f32, f32::INFINITY] {
@@ -264,7 +425,7 @@ mod tests {
         assert!(m.sample_collision_within(1.0, 0.5, 0.5).is_some());
         let clear = Medium {
             sigma_t: Rgb::ZERO,
-            ..m
+            ..m.clone()
         };
         assert!(clear.sample_collision_within(1.0, 0.5, 0.5).is_none());
     }
@@ -272,11 +433,7 @@ mod tests {
     #[test]
     fn free_flights_are_unbiased_per_channel() {
         // E[weight · 1(collision before t)] must equal 1 − exp(−σ t) in every channel.
-        let m = Medium {
-            sigma_t: Rgb::new(0.5, 1.0, 3.0),
-            albedo: Rgb::ONE,
-            phase: Phase::Isotropic,
-        };
+        let m = Medium::homogeneous(Rgb::new(0.5, 1.0, 3.0), Rgb::ONE, Phase::Isotropic);
         let mut s = Sampler::new(2, Stream::Photon, 0, 0);
         let n = 400_000;
         let (mut collide, mut pass) = (Rgb::ZERO, Rgb::ZERO);
@@ -299,5 +456,59 @@ mod tests {
             "{} vs {expect_collide}",
             collide / n as f32
         );
+    }
+
+    #[test]
+    fn delta_and_ratio_tracking_are_unbiased_per_channel() {
+        use crate::geometry::Ray;
+        use crate::texture::Wrap;
+        use crate::volume::{GridVolume, VolumeData, VolumeFilter};
+        // Two voxels along x over [0, 2]: σt (1, 2, 0) on the first, (3, 0.5, 0) on the second,
+        // scaled by 0.5. A ray along x from x = −1 to x = 1.5 crosses 1 of the first and 0.5 of
+        // the second: τ = 0.5 · (1 + 1.5, 2 + 0.25, 0).
+        let mut bytes = b"VOL\x03".to_vec();
+        for i in [1i32, 2, 1, 1, 3] {
+            bytes.extend(i.to_le_bytes());
+        }
+        for f in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 2.0, 0.0, 3.0, 0.5, 0.0] {
+            bytes.extend(f.to_le_bytes());
+        }
+        let data = VolumeData::parse(&bytes).unwrap();
+        let to_world = glam::Affine3A::from_scale(glam::Vec3::new(2.0, 1.0, 1.0));
+        let grid = GridVolume::new(data, to_world, false, VolumeFilter::Nearest, Wrap::Clamp);
+        let m = Medium {
+            grids: Some(Box::new(Grids {
+                density: Some(Density {
+                    grid,
+                    scale: 0.5,
+                    majorant: 1.5,
+                }),
+                albedo: None,
+            })),
+            ..Medium::homogeneous(Rgb::splat(1.5), Rgb::ONE, Phase::Isotropic)
+        };
+        let ray = Ray::new(Vec3A::new(-1.0, 0.5, 0.5), Vec3A::X);
+        let expect = (-Rgb::new(1.25, 1.125, 0.0)).exp();
+        let mut s = Sampler::new(4, Stream::Photon, 0, 0);
+        let n = 200_000;
+        let (mut ratio, mut pass, mut collide) = (Rgb::ZERO, Rgb::ZERO, Rgb::ZERO);
+        for _ in 0..n {
+            ratio += m.transmittance_along(&ray, 2.5, &mut s);
+            match m.sample_flight_along(&ray, 2.5, &mut s) {
+                Flight::Collision { t, weight } => {
+                    assert!(t > 1.0 && t < 2.5, "a collision outside the grid, at {t}");
+                    collide += weight;
+                }
+                Flight::Passed { weight } => pass += weight,
+            }
+        }
+        let n = n as f32;
+        for (what, got, want) in [
+            ("ratio tracking", ratio / n, expect),
+            ("delta tracking's passes", pass / n, expect),
+            ("delta tracking's collisions", collide / n, Rgb::ONE - expect),
+        ] {
+            assert!((got - want).abs().max_element() < 0.01, "{what}: {got} vs {want}");
+        }
     }
 }

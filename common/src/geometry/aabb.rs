@@ -67,4 +67,26 @@ impl Aabb {
         let e = self.extent();
         2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
     }
+
+    /// The part of `ray.at(0..t_max)` inside the box (slab test), as (entry, exit) with
+    /// entry < exit; None if the ray misses it. Axis by axis, with a zero direction component
+    /// tested by the origin, so that no NaN arises whatever the platform's min and max do.
+    pub fn clip(&self, ray: &crate::geometry::Ray, t_max: f32) -> Option<(f32, f32)> {
+        let (mut near, mut far) = (0.0f32, t_max);
+        for axis in 0..3 {
+            let (o, d) = (ray.o[axis], ray.d[axis]);
+            let (lo, hi) = (self.min[axis], self.max[axis]);
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+                continue;
+            }
+            let (a, b) = ((lo - o) / d, (hi - o) / d);
+            let (a, b) = if a <= b { (a, b) } else { (b, a) };
+            near = if a > near { a } else { near };
+            far = if b < far { b } else { far };
+        }
+        (near < far).then_some((near, far))
+    }
 }

@@ -49,14 +49,15 @@ pub fn emitted(
 /// One light sample's contribution at surface `hit`, through the media on the way. `medium` is
 /// the medium the path arrived in. The sample is weighted by the power heuristic against BSDF
 /// sampling that takes `bsdf_share` times as many samples (1 for a path that goes on to sample
-/// the BSDF; 0 for none, which gives the full contribution).
+/// the BSDF; 0 for none, which gives the full contribution). `sampler` serves the transmittance
+/// of heterogeneous media.
 pub fn light_sample(
     scene: &Scene,
     hit: &Hit,
     medium: Option<u32>,
-    u_select: f32,
-    u: Vec2,
+    (u_select, u): (f32, Vec2),
     bsdf_share: f32,
+    sampler: &mut Sampler,
 ) -> Rgb {
     let sp = &hit.sp;
     let Some((_, ls)) = scene.sample_light(sp.p, u_select, u) else {
@@ -68,7 +69,7 @@ pub fn light_sample(
         return Rgb::ZERO;
     }
     // The shadow ray leaves on the light's side of the surface.
-    let tr = scene.transmittance(sp, &ls, hit.shape.medium_after(ls.wi, sp.ng, medium));
+    let tr = scene.transmittance(sp, &ls, hit.shape.medium_after(ls.wi, sp.ng, medium), sampler);
     if tr == Rgb::ZERO {
         return Rgb::ZERO;
     }
@@ -89,12 +90,12 @@ pub fn light_sample_in_medium(
     p: Vec3A,
     d: Vec3A,
     medium: u32,
-    u_select: f32,
-    u: Vec2,
+    (u_select, u): (f32, Vec2),
     phase_share: f32,
+    sampler: &mut Sampler,
 ) -> Rgb {
     let sample = scene.sample_light(p, u_select, u);
-    light_in_medium(scene, p, d, medium, sample, phase_share)
+    light_in_medium(scene, p, d, medium, sample, phase_share, sampler)
 }
 
 /// [`light_sample_in_medium`] for a light sample already drawn (from
@@ -106,12 +107,13 @@ pub fn light_in_medium(
     medium: u32,
     sample: Option<(u32, LightSample)>,
     phase_share: f32,
+    sampler: &mut Sampler,
 ) -> Rgb {
     let Some((_, ls)) = sample else {
         return Rgb::ZERO;
     };
     let phase = scene.media[medium as usize].phase.eval(d, ls.wi);
-    let tr = scene.transmittance(&SurfacePoint::in_medium(p), &ls, Some(medium));
+    let tr = scene.transmittance(&SurfacePoint::in_medium(p), &ls, Some(medium), sampler);
     if tr == Rgb::ZERO {
         return Rgb::ZERO;
     }
@@ -134,12 +136,13 @@ pub fn equiangular_collision(
     ray: &Ray,
     t_max: f32,
     u: f32,
+    sampler: &mut Sampler,
 ) -> Option<(f32, Rgb)> {
     let c = light.point_position()?;
     let v = c - ray.o;
     let delta = v.dot(ray.d);
     let (t, pdf) = sample_equiangular(delta, (v - ray.d * delta).length(), t_max, u)?;
-    Some((t, medium.sigma_t * medium.transmittance(t) / pdf))
+    Some((t, medium.collision_weight(ray, t, sampler) / pdf))
 }
 
 /// Light from light `li` (picked with probability `pmf`) scattered back along `ray` at a
@@ -153,10 +156,11 @@ pub fn scattered_at(
     (li, pmf): (u32, f32),
     (t, weight): (f32, Rgb),
     u: Vec2,
+    sampler: &mut Sampler,
 ) -> Rgb {
     let p = ray.at(t);
     let ls = scene.sample_picked_light(li, pmf, p, u);
-    weight * scene.media[m as usize].albedo * light_in_medium(scene, p, ray.d, m, ls, 0.0)
+    weight * scene.media[m as usize].albedo_at(p) * light_in_medium(scene, p, ray.d, m, ls, 0.0, sampler)
 }
 
 /// Point-like lights' share of the light single-scattered back along `ray.at(0..t_max)` in
@@ -169,8 +173,8 @@ pub fn point_lights_along(scene: &Scene, ray: &Ray, m: u32, t_max: f32, sampler:
         return Rgb::ZERO;
     };
     let medium = &scene.media[m as usize];
-    match equiangular_collision(&scene.lights[li as usize], medium, ray, t_max, u_t) {
-        Some(collision) => scattered_at(scene, ray, m, (li, pmf), collision, u_light),
+    match equiangular_collision(&scene.lights[li as usize], medium, ray, t_max, u_t, sampler) {
+        Some(collision) => scattered_at(scene, ray, m, (li, pmf), collision, u_light, sampler),
         None => Rgb::ZERO,
     }
 }

@@ -60,7 +60,7 @@ pub fn radiance(scene: &Scene, settings: &DirectSettings, ray: Ray, sampler: &mu
         let share = nb as f32 / ne as f32;
         for _ in 0..ne {
             let (u_select, u) = (sampler.next_1d(), sampler.next_2d());
-            l += light::light_sample(scene, &hit, None, u_select, u, share) / ne as f32;
+            l += light::light_sample(scene, &hit, None, (u_select, u), share, sampler) / ne as f32;
         }
     }
     for _ in 0..nb {

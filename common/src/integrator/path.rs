@@ -70,7 +70,7 @@ pub fn radiance(
             }
             // Scattering in a medium: light sampling, then the phase function.
             Event::Medium { p, medium, weight } => {
-                walk.beta *= weight * scene.media[medium as usize].albedo;
+                walk.beta *= weight * scene.media[medium as usize].albedo_at(p);
                 leave_caustics |= walk.depth == 0 && share == Share::CameraSide;
                 if walk.depth + 1 >= max_depth {
                     break;
@@ -80,7 +80,7 @@ pub fn radiance(
                     && scene.lights[li as usize].point_position().is_none()
                 {
                     let ls = scene.sample_picked_light(li, pmf, p, u_light);
-                    l += walk.beta * direct::light_in_medium(scene, p, walk.ray.d, medium, ls, 1.0);
+                    l += walk.beta * direct::light_in_medium(scene, p, walk.ray.d, medium, ls, 1.0, sampler);
                 }
                 walk.scatter_in_medium(scene, p, medium, sampler);
             }
@@ -95,7 +95,8 @@ pub fn radiance(
                 // Next-event estimation: a light sample, weighted against BSDF sampling.
                 let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
                 if hit.bsdf.has_smooth() {
-                    l += walk.beta * direct::light_sample(scene, &hit, walk.medium, u_sel, u_light, 1.0);
+                    l += walk.beta
+                        * direct::light_sample(scene, &hit, walk.medium, (u_sel, u_light), 1.0, sampler);
                 }
                 let Some(bs) = Walk::sample_bsdf(&hit, sampler, TransportMode::Radiance) else {
                     break;

@@ -64,12 +64,12 @@ pub fn trace_light_path(
                 let med = &scene.media[medium as usize];
                 let u = s.next_2d();
                 if let Some((at, to_camera, value)) =
-                    to_camera(scene, &SurfacePoint::in_medium(p), u, |_| Some(medium))
+                    to_camera(scene, &SurfacePoint::in_medium(p), u, |_| Some(medium), &mut s)
                 {
                     // The phase function for light travelling along the ray and leaving
                     // towards the camera, written as the camera path's (reversed) directions.
                     let phase = med.phase.eval(-to_camera, -walk.ray.d);
-                    splat(at, walk.beta * med.albedo * value * phase);
+                    splat(at, walk.beta * med.albedo_at(p) * value * phase);
                 }
                 if !walk.scatter_light(scene, p, medium, &mut s) {
                     return;
@@ -80,7 +80,7 @@ pub fn trace_light_path(
                 if hit.bsdf.has_smooth() {
                     let sp = &hit.sp;
                     let medium_toward = |d| hit.shape.medium_after(d, sp.ng, walk.medium);
-                    if let Some((at, to_camera, value)) = to_camera(scene, sp, u, medium_toward) {
+                    if let Some((at, to_camera, value)) = to_camera(scene, sp, u, medium_toward, &mut s) {
                         // f · |cos θ| on the camera's side, in importance transport: the light
                         // arrived along `hit.wo`.
                         let wc = hit.frame.to_local(to_camera);
@@ -106,6 +106,7 @@ fn to_camera(
     sp: &SurfacePoint,
     u_lens: Vec2,
     medium_toward: impl Fn(Vec3A) -> Option<u32>,
+    sampler: &mut Sampler,
 ) -> Option<(Vec2, Vec3A, Rgb)> {
     let c = scene.camera.connect(sp.p, u_lens)?;
     let wi = (c.lens - sp.p).normalize();
@@ -118,6 +119,6 @@ fn to_camera(
         pdf: 1.0,
         delta: true,
     };
-    let tr = scene.transmittance(sp, &lens, medium_toward(wi));
+    let tr = scene.transmittance(sp, &lens, medium_toward(wi), sampler);
     (tr != Rgb::ZERO).then(|| (c.film, wi, tr * c.weight))
 }

@@ -155,7 +155,7 @@ impl Walk {
     ) -> Event<'s> {
         self.advance(scene, |walk, m, t_surface| {
             let med = &scene.media[m as usize];
-            let flight = med.sample_flight(t_surface, sampler.next_1d(), sampler.next_1d());
+            let flight = med.sample_flight_along(&walk.ray, t_surface, sampler);
             let end = match flight {
                 Flight::Collision { t, .. } => t,
                 Flight::Passed { .. } => t_surface,
@@ -340,7 +340,7 @@ impl Walk {
     /// Scatters a light path in medium `m` at `p`: the photons' roulette on the medium's
     /// albedo, then the phase function. False when the path ends.
     pub fn scatter_light(&mut self, scene: &Scene, p: Vec3A, m: u32, sampler: &mut Sampler) -> bool {
-        let Some(weight) = photon_roulette(scene.media[m as usize].albedo, sampler) else {
+        let Some(weight) = photon_roulette(scene.media[m as usize].albedo_at(p), sampler) else {
             return false;
         };
         self.beta *= weight;

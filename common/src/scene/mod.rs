@@ -216,20 +216,17 @@ impl Scene {
         Some((Self::spawn_ray(sp, d), shape.medium_after(d, sp.ng, medium)))
     }
 
-    /// Whether nothing blocks the segment from `sp` to the sampled light point.
-    pub fn unoccluded(&self, sp: &SurfacePoint, ls: &LightSample) -> bool {
-        self.transmittance(sp, ls, None) != crate::color::Rgb::ZERO
-    }
-
     /// The fraction of light that travels from the sampled light point to `sp` (a surface, or
     /// a point in a medium with zero error and normal), starting in `medium` at `sp`: zero if a
     /// surface blocks it, the media's transmittance otherwise. Null surfaces (medium
-    /// boundaries) are crossed, changing the medium.
+    /// boundaries) are crossed, changing the medium. Heterogeneous media estimate their
+    /// transmittance with random numbers from `sampler`; nothing else draws any.
     pub fn transmittance(
         &self,
         sp: &SurfacePoint,
         ls: &LightSample,
         mut medium: Option<u32>,
+        sampler: &mut crate::sampling::Sampler,
     ) -> crate::color::Rgb {
         use crate::color::Rgb;
         let mut o = offset_ray_origin(sp.p, sp.p_err, sp.ng, ls.wi);
@@ -252,9 +249,11 @@ impl Scene {
             } else {
                 self.bvh.intersect(&Ray::new(o, d), 1.0 - 1e-4)
             };
+            // The medium's stretch, with a unit direction.
+            let unit = Ray::new(o, d / len);
             let Some(hit) = hit else {
                 if let Some(m) = medium {
-                    tr *= self.media[m as usize].transmittance(len);
+                    tr *= self.media[m as usize].transmittance_along(&unit, len, sampler);
                 }
                 return tr;
             };
@@ -267,7 +266,7 @@ impl Scene {
             }
             tr *= bsdf.null_transmission(surface.tex());
             if let Some(m) = medium {
-                tr *= self.media[m as usize].transmittance(hit.t * len);
+                tr *= self.media[m as usize].transmittance_along(&unit, hit.t * len, sampler);
             }
             medium = shape.medium_after(d, surface.ng, medium);
             o = offset_ray_origin(surface.p, surface.p_err, surface.ng, d);

@@ -129,8 +129,8 @@ impl Bitmap {
     }
 
     fn texel(&self, x: i64, y: i64) -> Rgb {
-        let x = wrap(x, self.width as i64, self.wrap);
-        let y = wrap(y, self.height as i64, self.wrap);
+        let x = wrap_index(x, self.width as i64, self.wrap);
+        let y = wrap_index(y, self.height as i64, self.wrap);
         self.texels[(y * self.width as i64 + x) as usize]
     }
 
@@ -181,7 +181,7 @@ impl Bitmap {
 }
 
 /// A texel index wrapped into 0..n.
-fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
+pub(crate) fn wrap_index(i: i64, n: i64, mode: Wrap) -> i64 {
     match mode {
         Wrap::Repeat => i.rem_euclid(n),
         Wrap::Clamp => i.clamp(0, n - 1),
@@ -247,15 +247,19 @@ mod tests {
     #[test]
     fn wrap_modes() {
         assert_eq!(
-            (-1..5).map(|i| wrap(i, 2, Wrap::Repeat)).collect::<Vec<_>>(),
+            (-1..5)
+                .map(|i| wrap_index(i, 2, Wrap::Repeat))
+                .collect::<Vec<_>>(),
             [1, 0, 1, 0, 1, 0]
         );
         assert_eq!(
-            (-1..5).map(|i| wrap(i, 2, Wrap::Mirror)).collect::<Vec<_>>(),
+            (-1..5)
+                .map(|i| wrap_index(i, 2, Wrap::Mirror))
+                .collect::<Vec<_>>(),
             [0, 0, 1, 1, 0, 0]
         );
         assert_eq!(
-            (-1..5).map(|i| wrap(i, 2, Wrap::Clamp)).collect::<Vec<_>>(),
+            (-1..5).map(|i| wrap_index(i, 2, Wrap::Clamp)).collect::<Vec<_>>(),
             [0, 0, 1, 1, 1, 1]
         );
     }

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use glam::{Affine2, Vec2};
 
+pub(crate) use bitmap::wrap_index;
 pub use bitmap::{Bitmap, BitmapError, Filter, Wrap};
 
 use crate::color::{Rgb, luminance};

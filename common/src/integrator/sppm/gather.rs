@@ -82,10 +82,18 @@ pub fn camera_path(ctx: &GatherContext, ray: Ray, sampler: &mut Sampler) -> Rgb 
             // The point estimate: the first collision is a gather point, direct light plus
             // volume photons.
             Event::Medium { p, medium, weight } => {
-                walk.beta *= weight * scene.media[medium as usize].albedo;
+                walk.beta *= weight * scene.media[medium as usize].albedo_at(p);
                 let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
                 l += walk.beta
-                    * direct::light_sample_in_medium(scene, p, walk.ray.d, medium, u_sel, u_light, 0.0);
+                    * direct::light_sample_in_medium(
+                        scene,
+                        p,
+                        walk.ray.d,
+                        medium,
+                        (u_sel, u_light),
+                        0.0,
+                        sampler,
+                    );
                 if let VolumeMap::Point(map) = ctx.volume_map {
                     l += walk.beta * volume_estimate(ctx, map, p, walk.ray.d, medium);
                 }
@@ -102,10 +110,12 @@ pub fn camera_path(ctx: &GatherContext, ray: Ray, sampler: &mut Sampler) -> Rgb 
                 let (u_sel, u_light) = (sampler.next_1d(), sampler.next_2d());
                 let gather = hit.bsdf.gathers_photons();
                 if gather {
-                    l += walk.beta * direct::light_sample(scene, &hit, walk.medium, u_sel, u_light, 0.0);
+                    l += walk.beta
+                        * direct::light_sample(scene, &hit, walk.medium, (u_sel, u_light), 0.0, sampler);
                     l += walk.beta * photon_estimate(ctx, &hit);
                 } else if hit.bsdf.has_smooth() {
-                    l += walk.beta * direct::light_sample(scene, &hit, walk.medium, u_sel, u_light, 1.0);
+                    l += walk.beta
+                        * direct::light_sample(scene, &hit, walk.medium, (u_sel, u_light), 1.0, sampler);
                 }
                 // Continue through specular lobes, and through glossy ones where nothing was
                 // gathered.
@@ -164,7 +174,8 @@ fn volume_estimate(ctx: &GatherContext, map: &PhotonMap, p: Vec3A, d: Vec3A, m: 
     }
     let r = ctx.volume_radius;
     let volume = 4.0 / 3.0 * PI * r * r * r;
-    let inv_sigma = Rgb::select(med.sigma_t.cmpgt(Rgb::ZERO), Rgb::ONE / med.sigma_t, Rgb::ZERO);
+    let sigma_t = med.sigma_t_at(p);
+    let inv_sigma = Rgb::select(sigma_t.cmpgt(Rgb::ZERO), Rgb::ONE / sigma_t, Rgb::ZERO);
     sum * inv_sigma * (ctx.power_unit / volume)
 }
 
@@ -191,6 +202,10 @@ const BEAM_ROULETTE_BELOW: f32 = 0.1;
 fn beam_estimate(ctx: &GatherContext, ray: &Ray, m: u32, t_max: f32, sampler: &mut Sampler) -> (Rgb, Rgb) {
     let scene = ctx.scene;
     let med = &scene.media[m as usize];
+    debug_assert!(
+        med.is_uniform(),
+        "the job refuses beam estimates in media that vary"
+    );
     // Direct light (which photons do not store) at a collision drawn within the segment:
     // equiangularly about a point light (its 1/d² would give the exponential's samples
     // unbounded variance near the light), else by transmittance within the part the light
@@ -205,13 +220,13 @@ fn beam_estimate(ctx: &GatherContext, ray: &Ray, m: u32, t_max: f32, sampler: &m
     if let Some((li, pmf)) = scene.pick_light(u_sel) {
         let light = &scene.lights[li as usize];
         // Else by transmittance, within the stretch the light reaches (a beam's cylinder).
-        let collision = direct::equiangular_collision(light, med, ray, t_max, u_t).or_else(|| {
+        let collision = direct::equiangular_collision(light, med, ray, t_max, u_t, sampler).or_else(|| {
             let (a, b) = light.lit_span(ray, t_max)?;
             let (t, weight) = med.sample_collision_within(b - a, u_channel, u_t)?;
             Some((a + t, weight * med.transmittance(a)))
         });
         if let Some(collision) = collision {
-            l += direct::scattered_at(scene, ray, m, (li, pmf), collision, u_light);
+            l += direct::scattered_at(scene, ray, m, (li, pmf), collision, u_light, sampler);
         }
     }
     // The roulette: survival S(t) and the distance where it fails.

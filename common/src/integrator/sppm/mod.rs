@@ -122,6 +122,11 @@ pub enum SppmError {
     /// A volume radius ratio that is not a positive number.
     #[error("the volume radius ratio must be a positive number, not {0}")]
     VolumeRatio(f32),
+    /// A beam estimate asked for in a scene whose media vary in space.
+    #[error(
+        "the {0} volume estimate integrates homogeneous media of constant albedo in closed form, and this scene has a medium whose density or albedo varies: use the point estimate (--volume-estimate point, the default for such scenes)"
+    )]
+    VaryingMedium(&'static str),
 }
 
 impl SppmSettings {
@@ -145,17 +150,38 @@ impl SppmSettings {
         Ok(())
     }
 
+    /// Checks the volume estimate against the scene's media: the beam estimates need media
+    /// that are the same everywhere.
+    pub fn validate_for(&self, scene: &Scene) -> Result<(), SppmError> {
+        let name = match self.volume_estimate {
+            VolumeEstimate::Point => return Ok(()),
+            VolumeEstimate::Beam => "beam",
+            VolumeEstimate::PhotonBeams => "photon-beams",
+        };
+        if scene.media.iter().all(|m| m.is_uniform()) {
+            Ok(())
+        } else {
+            Err(SppmError::VaryingMedium(name))
+        }
+    }
+
     /// Settings from the scene's `<integrator>`: Mitsuba's `photon_count`, `initial_radius` (0 or
-    /// absent: [`default_radius`]) and `alpha`, our `k`, and `max_depth` and `rr_depth`.
+    /// absent: [`default_radius`]) and `alpha`, our `k`, and `max_depth` and `rr_depth`. A scene
+    /// with a medium that varies in space gets the point estimate, the one that handles it.
     pub fn from_scene(scene: &Scene) -> SppmSettings {
         let decl = &scene.integrator;
+        let estimate = if scene.media.iter().all(|m| m.is_uniform()) {
+            VolumeEstimate::default()
+        } else {
+            VolumeEstimate::Point
+        };
         let mut s = SppmSettings {
             photons: default_photons(scene),
             initial_radius: 0.0,
             alpha: 2.0 / 3.0,
             k: 1.1,
-            volume_radius_ratio: VolumeEstimate::default().default_radius_ratio(),
-            volume_estimate: VolumeEstimate::default(),
+            volume_radius_ratio: estimate.default_radius_ratio(),
+            volume_estimate: estimate,
             max_depth: u32::try_from(decl.max_depth).ok(),
             rr_depth: decl.rr_depth,
         };

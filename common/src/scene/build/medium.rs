@@ -1,9 +1,13 @@
 //! `<medium>`, and the media a shape or sensor lies in.
 
+use glam::{Affine3A, Mat4};
+
 use crate::color::Rgb;
-use crate::medium::{Medium, Phase};
+use crate::medium::{Density, Grids, Medium, Phase};
 use crate::scene::props::{Props, Res};
 use crate::scene::xml::Element;
+use crate::texture::Wrap;
+use crate::volume::{GridVolume, VolumeData, VolumeFilter};
 
 use super::Builder;
 
@@ -44,18 +48,55 @@ impl Builder<'_> {
         Ok(out)
     }
 
-    /// `<medium type="homogeneous">` with an optional nested `<phase>`.
+    /// `<medium type="homogeneous">` or `"heterogeneous"`, with an optional nested `<phase>`.
+    /// A homogeneous medium's albedo may come from a `<volume>`; a heterogeneous one's σt and
+    /// albedo may both.
     pub(super) fn medium(&mut self, el: &Element) -> Res<u32> {
         let p = Props::new(self.ctx, el)?;
-        if p.kind()? != "homogeneous" {
-            return Err(self.ctx.err(el, "only homogeneous media are supported"));
+        let kind = p.kind()?;
+        if kind != "homogeneous" && kind != "heterogeneous" {
+            return Err(self.ctx.err(
+                el,
+                format!("medium type \"{kind}\" is not supported (homogeneous, heterogeneous)"),
+            ));
         }
         let scale = p.float_or("scale", 1.0)?;
         if scale < 0.0 {
             return Err(p.err_at("scale", "scale cannot be negative".into()));
         }
-        let sigma_t = p.non_negative_rgb("sigma_t", Rgb::ONE)? * scale;
-        let albedo = p.reflectance("albedo", Rgb::splat(0.75))?;
+        let (sigma_t, density) = match (kind, p.named_object("volume", "sigma_t")) {
+            ("homogeneous", Some(v)) => {
+                return Err(self.ctx.err(
+                    v,
+                    "a homogeneous medium's sigma_t is a constant; a medium whose density varies is type=\"heterogeneous\"",
+                ));
+            }
+            ("homogeneous", None) => (p.non_negative_rgb("sigma_t", Rgb::ONE)? * scale, None),
+            (_, v) => {
+                let grid = match v {
+                    Some(v) => self.volume(v)?,
+                    // Mitsuba's constvolume, which like every volume covers the unit cube.
+                    None => constant_volume(p.non_negative_rgb("sigma_t", Rgb::ONE)?, Mat4::IDENTITY),
+                };
+                if grid.min() < 0.0 {
+                    return Err(p.err_at(
+                        "sigma_t",
+                        format!("sigma_t cannot be negative: the grid holds {}", grid.min()),
+                    ));
+                }
+                let majorant = scale * grid.max();
+                let density = Density {
+                    grid,
+                    scale,
+                    majorant,
+                };
+                (Rgb::splat(majorant), Some(density))
+            }
+        };
+        let (albedo, albedo_grid) = match p.named_object("volume", "albedo") {
+            Some(v) => (Rgb::splat(0.75), Some(self.volume(v)?)),
+            None => (p.reflectance("albedo", Rgb::splat(0.75))?, None),
+        };
         let _ = p.boolean("sample_emitters")?;
         // Only spectral variants read it.
         let _ = p.boolean("has_spectral_extinction")?;
@@ -86,11 +127,88 @@ impl Builder<'_> {
             }
         };
         p.finish()?;
+        let grids = (density.is_some() || albedo_grid.is_some()).then(|| {
+            Box::new(Grids {
+                density,
+                albedo: albedo_grid,
+            })
+        });
         self.media.push(Medium {
-            sigma_t,
-            albedo,
-            phase,
+            grids,
+            ..Medium::homogeneous(sigma_t, albedo, phase)
         });
         Ok(self.media.len() as u32 - 1)
     }
+
+    /// A `<volume>`: Mitsuba's `gridvolume` (a `.vol` file) or `constvolume`.
+    fn volume(&mut self, el: &Element) -> Res<GridVolume> {
+        let p = Props::new(self.ctx, el)?;
+        let to_world = p.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        let volume = match p.kind()? {
+            "gridvolume" => {
+                let name = p
+                    .string("filename")?
+                    .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
+                let path = p.resolve_file("filename", name)?;
+                let data = std::fs::read(&path)
+                    .map_err(crate::volume::VolumeError::from)
+                    .and_then(|bytes| VolumeData::parse(&bytes))
+                    .map_err(|e| p.err_at("filename", format!("{}: {e}", path.display())))?;
+                let filter = match p.string("filter_type")? {
+                    None | Some("trilinear") => VolumeFilter::Trilinear,
+                    Some("nearest") => VolumeFilter::Nearest,
+                    Some(f) => {
+                        return Err(p.err_at(
+                            "filter_type",
+                            format!("filter_type \"{f}\" is not supported (trilinear, nearest)"),
+                        ));
+                    }
+                };
+                let wrap = match p.string("wrap_mode")? {
+                    None | Some("clamp") => Wrap::Clamp,
+                    Some("repeat") => Wrap::Repeat,
+                    Some("mirror") => Wrap::Mirror,
+                    Some(w) => {
+                        return Err(p.err_at(
+                            "wrap_mode",
+                            format!("wrap_mode \"{w}\" is not supported (clamp, repeat, mirror)"),
+                        ));
+                    }
+                };
+                let use_grid_bbox = p.boolean("use_grid_bbox")?.unwrap_or(false);
+                // Spectral upsampling and GPU textures in Mitsuba: no effect on RGB values.
+                let _ = (p.boolean("raw")?, p.boolean("accel")?);
+                GridVolume::new(data, affine(&to_world), use_grid_bbox, filter, wrap)
+            }
+            "constvolume" => constant_volume(p.non_negative_rgb("value", Rgb::ONE)?, to_world),
+            other => {
+                return Err(self.ctx.err(
+                    el,
+                    format!("volume type \"{other}\" is not supported (gridvolume, constvolume)"),
+                ));
+            }
+        };
+        p.finish()?;
+        Ok(volume)
+    }
+}
+
+/// A constant as a one-voxel grid over the unit cube under `to_world`, the box Mitsuba gives
+/// every volume.
+fn constant_volume(value: Rgb, to_world: Mat4) -> GridVolume {
+    let data = VolumeData {
+        res: [1, 1, 1],
+        channels: 3,
+        values: Box::new([value.x, value.y, value.z]),
+        bbox: crate::geometry::Aabb {
+            min: glam::Vec3A::ZERO,
+            max: glam::Vec3A::ONE,
+        },
+    };
+    GridVolume::new(data, affine(&to_world), false, VolumeFilter::Nearest, Wrap::Clamp)
+}
+
+/// The affine part of a transform (Mitsuba's volumes take no projection).
+fn affine(m: &Mat4) -> Affine3A {
+    Affine3A::from_mat4(*m)
 }
