@@ -533,6 +533,28 @@ fn roughness_and_projector_mistakes() {
 }
 
 #[test]
+fn a_raw_constant_needs_a_value() {
+    let raw = |value: &str| {
+        scene_text(
+            &format!(
+                "<shape type=\"sphere\"><bsdf type=\"normalmap\"><texture name=\"normalmap\" type=\"rawconstant\">{value}</texture><bsdf type=\"diffuse\"/></bsdf></shape>"
+            ),
+            FILM,
+        )
+    };
+    expect_error(
+        &raw(""),
+        8,
+        "missing the value parameter (a <float> or a <vector>)",
+    );
+    expect_error(
+        &raw("<string name=\"value\" value=\"up\"/>"),
+        8,
+        "parameter 'value' must be given as <float> or <integer>",
+    );
+}
+
+#[test]
 fn mesh_attribute_mistakes() {
     let attr = |name: &str, param: &str| {
         format!(

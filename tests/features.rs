@@ -165,3 +165,11 @@ fn heterogeneous_media_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("heterogeneous");
     photonfarm_tests::check_sppm_convergence("heterogeneous");
 }
+
+/// `rawconstant.xml`: Mitsuba's `rawconstant` as a constant normal map that tilts every shading
+/// normal (taken as a plain normal map, 4.7% off), as the identity normal map, and as a
+/// roughness.
+#[test]
+fn raw_constants_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("rawconstant");
+}

@@ -30,6 +30,9 @@ pub enum Texture {
         /// Mitsuba's `scale`.
         scale: f32,
     },
+    /// One value everywhere, taken as given (Mitsuba's `rawconstant`: no reflectance range and no
+    /// spectral upsampling, as for a normal map's (0.5, 0.5, 1)).
+    Constant(Rgb),
     /// Two colours in a 2 × 2 checkerboard over the unit square (Mitsuba's `checkerboard`).
     Checkerboard {
         /// The colour where ⌊2u⌋ + ⌊2v⌋ is even.
@@ -71,6 +74,7 @@ impl Texture {
         match self {
             Texture::Bitmap(b) => b.eval(uv),
             Texture::Attribute { scale, .. } => at.attr * *scale,
+            Texture::Constant(v) => *v,
             Texture::Checkerboard {
                 color0,
                 color1,
@@ -94,6 +98,8 @@ impl Texture {
         match self {
             Texture::Bitmap(b) => luminance(b.eval(at.uv)),
             Texture::Attribute { scale, .. } => at.attr.x * *scale,
+            // Mitsuba's eval_1 of a one-value rawconstant (it refuses three values there).
+            Texture::Constant(v) => v.x,
             Texture::Checkerboard { color0, color1, .. } => {
                 let first = self.eval(at) == *color0;
                 crate::color::mean(if first { *color1 } else { *color0 })
@@ -108,6 +114,7 @@ impl Texture {
         match self {
             Texture::Bitmap(b) => luminance(b.mean()),
             Texture::Attribute { .. } => 0.0,
+            Texture::Constant(v) => crate::color::mean(*v),
             Texture::Checkerboard { color0, color1, .. } => {
                 0.5 * (crate::color::mean(*color0) + crate::color::mean(*color1))
             }

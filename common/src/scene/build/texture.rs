@@ -117,6 +117,20 @@ impl Builder<'_> {
                     scale: p.float("scale")?.unwrap_or(1.0),
                 }
             }
+            "rawconstant" => {
+                let value = match p.tag_of("value") {
+                    Some("vector" | "point") => p.point("value")?.expect("tagged"),
+                    Some(_) => Rgb::splat(p.float("value")?.ok_or_else(|| {
+                        p.err_at("value", "a rawconstant's value is a <float> or a <vector>".into())
+                    })?),
+                    None => {
+                        return Err(self
+                            .ctx
+                            .err(el, "missing the value parameter (a <float> or a <vector>)"));
+                    }
+                };
+                Texture::Constant(value)
+            }
             "checkerboard" => Texture::Checkerboard {
                 color0: p.reflectance("color0", Rgb::splat(0.4))?,
                 color1: p.reflectance("color1", Rgb::splat(0.2))?,
@@ -126,7 +140,7 @@ impl Builder<'_> {
                 return Err(self.ctx.err(
                     el,
                     format!(
-                        "texture type \"{other}\" is not supported (bitmap, checkerboard, mesh_attribute)"
+                        "texture type \"{other}\" is not supported (bitmap, checkerboard, mesh_attribute, rawconstant)"
                     ),
                 ));
             }
