@@ -533,6 +533,18 @@ fn roughness_and_projector_mistakes() {
 }
 
 #[test]
+fn a_curve_file_must_hold_control_points() {
+    expect_error(
+        &scene_text(
+            "<shape type=\"linearcurve\"><string name=\"filename\" value=\"inside.obj\"/></shape>",
+            FILM,
+        ),
+        8,
+        "inside.obj: line 1: expected \"x y z radius\"",
+    );
+}
+
+#[test]
 fn a_raw_constant_needs_a_value() {
     let raw = |value: &str| {
         scene_text(

@@ -173,3 +173,11 @@ fn heterogeneous_media_match_mitsuba() {
 fn raw_constants_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("rawconstant");
 }
+
+/// `curves.xml`: Mitsuba's `linearcurve`, tapering and constant, under a checkerboard (u about
+/// the axis, v along all of a shape's segments) and, placed by a rotation and a non-uniform
+/// scale, in an anisotropic conductor oriented by its ∂p/∂u.
+#[test]
+fn linear_curves_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("curves");
+}

@@ -3,6 +3,7 @@
 mod aabb;
 mod bvh;
 mod bvh4;
+mod curve;
 mod cylinder;
 mod frame;
 mod instance;
@@ -13,6 +14,7 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use bvh::{Backend, Bvh};
+pub use curve::CurveSegment;
 pub use cylinder::Cylinder;
 pub use frame::Frame;
 pub use instance::Instance;
@@ -32,6 +34,8 @@ pub enum Primitive {
     Sphere(Sphere),
     /// An analytic open tube (Mitsuba's `cylinder`).
     Cylinder(Box<Cylinder>),
+    /// A segment of a linear curve (Mitsuba's `linearcurve`).
+    Curve(Box<CurveSegment>),
     /// A placed copy of a shape group, tested in the group's own tree.
     Instance(Box<Instance>),
 }
@@ -123,6 +127,7 @@ impl Primitive {
             Primitive::Triangle(t) => t.bounds(),
             Primitive::Sphere(s) => s.bounds(),
             Primitive::Cylinder(c) => c.bounds(),
+            Primitive::Curve(c) => c.bounds(),
             Primitive::Instance(i) => i.bounds(),
         }
     }
@@ -134,6 +139,7 @@ impl Primitive {
             Primitive::Triangle(t) => t.shape,
             Primitive::Sphere(s) => s.shape,
             Primitive::Cylinder(c) => c.shape,
+            Primitive::Curve(c) => c.shape,
             Primitive::Instance(_) => u32::MAX,
         }
     }
@@ -145,7 +151,8 @@ impl Primitive {
             Primitive::Triangle(t) => t.area(),
             Primitive::Sphere(s) => s.area(),
             Primitive::Cylinder(c) => c.area(),
-            Primitive::Instance(_) => 0.0,
+            // Curves are never lights: the loader refuses them, as Mitsuba cannot sample them.
+            Primitive::Curve(_) | Primitive::Instance(_) => 0.0,
         }
     }
 
@@ -170,6 +177,12 @@ impl Primitive {
                 b2: 0.0,
                 inner: 0,
             }),
+            Primitive::Curve(c) => c.intersect(ray, t_max).map(|t| PrimHit {
+                t,
+                b1: 0.0,
+                b2: 0.0,
+                inner: 0,
+            }),
             Primitive::Instance(i) => i.intersect_placed(ray, t_max),
         }
     }
@@ -180,6 +193,7 @@ impl Primitive {
             Primitive::Triangle(t) => t.surface(hit.b1, hit.b2),
             Primitive::Sphere(s) => s.surface(ray.o + ray.d * hit.t),
             Primitive::Cylinder(c) => c.surface(ray.o + ray.d * hit.t),
+            Primitive::Curve(c) => c.surface(ray.o + ray.d * hit.t),
             Primitive::Instance(i) => i.surface(
                 ray,
                 &Hit {
@@ -205,6 +219,7 @@ impl Primitive {
             Primitive::Instance(_) => {
                 unreachable!("the loader refuses emitters in shape groups, so no light holds an instance")
             }
+            Primitive::Curve(_) => unreachable!("the loader refuses curves as emitters"),
         }
     }
 }

@@ -6,6 +6,7 @@
 //! element.
 
 mod build;
+mod curves;
 mod error;
 mod mesh;
 mod named;

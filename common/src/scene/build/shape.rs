@@ -7,7 +7,7 @@ use glam::{Mat4, Vec3A};
 
 use crate::bsdf::{Bsdf, Diffuse};
 use crate::color::Rgb;
-use crate::geometry::{Bvh, Cylinder, Instance, Primitive, Sphere, Triangle};
+use crate::geometry::{Bvh, CurveSegment, Cylinder, Instance, Primitive, Sphere, Triangle};
 use crate::scene::ShapeInfo;
 use crate::scene::mesh::{self, Attribute, Mesh};
 use crate::scene::props::{Props, Res};
@@ -86,6 +86,39 @@ impl Builder<'_> {
                 })));
                 None
             }
+            "linearcurve" => {
+                if flip {
+                    return Err(p.err_at("flip_normals", "a curve's normals cannot be flipped".into()));
+                }
+                let name = p
+                    .string("filename")?
+                    .ok_or_else(|| self.ctx.err(el, "missing the filename parameter"))?;
+                let path = p.resolve_file("filename", name)?;
+                let curves = std::fs::read_to_string(&path)
+                    .map_err(|e| e.to_string())
+                    .and_then(|text| crate::scene::curves::parse(&text, 2))
+                    .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
+                let segments: u32 = curves.iter().map(|c| c.len() as u32 - 1).sum();
+                let mut i = 0;
+                for curve in &curves {
+                    // Mitsuba moves the control points by to_world and keeps their radii.
+                    let points: Vec<(Vec3A, f32)> = curve
+                        .iter()
+                        .map(|(q, r)| (to_world.transform_point3(glam::Vec3::from(*q)).into(), *r))
+                        .collect();
+                    for pair in points.windows(2) {
+                        self.prims.push(Primitive::Curve(Box::new(CurveSegment {
+                            p: [pair[0].0, pair[1].0],
+                            r: [pair[0].1, pair[1].1],
+                            shape: index,
+                            index: i,
+                            segments,
+                        })));
+                        i += 1;
+                    }
+                }
+                None
+            }
             "rectangle" => Some(mesh::rectangle()),
             "cube" => Some(mesh::cube()),
             "disk" => Some(mesh::disk()),
@@ -132,7 +165,7 @@ impl Builder<'_> {
                     el,
                     format!(
                         "shape type \"{other}\" is not supported (sphere, cylinder, rectangle, cube, disk, obj, ply, \
-                         serialized, shapegroup, instance)"
+                         serialized, linearcurve, shapegroup, instance)"
                     ),
                 ));
             }
@@ -233,6 +266,12 @@ impl Builder<'_> {
             let ep = Props::new(self.ctx, em)?;
             if ep.kind()? != "area" {
                 return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
+            }
+            if kind == "linearcurve" {
+                return Err(self.ctx.err(
+                    em,
+                    "a curve cannot be an emitter (Mitsuba cannot sample points on one)",
+                ));
             }
             let radiance = match self.light_texture(&ep, "radiance")? {
                 Some(t) => Param::Textured(t),
