@@ -181,3 +181,10 @@ fn raw_constants_match_mitsuba() {
 fn linear_curves_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("curves");
 }
+
+/// `bspline.xml`: Mitsuba's `bsplinecurve`, intersected as linear pieces and put back on the
+/// cubic sweep, under a checkerboard and in an anisotropic conductor.
+#[test]
+fn bspline_curves_match_mitsuba() {
+    photonfarm_tests::check_declared_against_mitsuba("bspline");
+}

@@ -1,11 +1,14 @@
-//! Mitsuba's `linearcurve`: tubes through control points whose radius varies linearly along
-//! each segment, with round joints and end caps. Mitsuba renders them with Embree's round linear
-//! curves: each segment is the sweep of a sphere whose centre and radius go linearly from one
-//! control point to the next, which is the convex hull of its two end spheres (a cone tangent
-//! to both, capped by them). Backfaces are culled, as in Mitsuba: a ray starting inside a
-//! curve does not hit it.
+//! Mitsuba's `linearcurve` and `bsplinecurve`: tubes through control points whose radius
+//! varies along them. Mitsuba renders them with Embree's round curves: the sweep of a sphere
+//! whose centre and radius follow the curve. A linear segment's sweep is the convex hull of
+//! its two end spheres (a cone tangent to both, capped by them), intersected exactly. A cubic
+//! B-spline segment is intersected as [`SPLINE_PIECES`] such linear sweeps through points of
+//! the spline, and the hit is then put on the true sweep: the touching sphere's parameter
+//! refined by Newton's method, the normal and (u, v) Mitsuba's. Backfaces are culled, as in
+//! Mitsuba: a ray starting inside a curve does not hit it.
 
 use std::f32::consts::PI;
+use std::sync::Arc;
 
 use glam::{DVec3, Vec2, Vec3A};
 
@@ -25,6 +28,96 @@ pub struct CurveSegment {
     pub index: u32,
     /// Segments in the shape.
     pub segments: u32,
+    /// Whether each end sphere is part of the surface: false at the open ends of a B-spline
+    /// curve (Mitsuba's have no end caps).
+    pub caps: [bool; 2],
+    /// For a piece of a B-spline segment: the segment, and the piece's span of its parameter.
+    pub spline: Option<(Arc<SplineSegment>, [f32; 2])>,
+}
+
+/// Linear pieces per B-spline segment: the silhouette of a piece departs from the spline's by
+/// under 1/(8·16²) of the segment's curvature times its length squared, far below a pixel for
+/// the curves Mitsuba's scenes hold.
+pub const SPLINE_PIECES: u32 = 16;
+
+/// One cubic B-spline segment of a `bsplinecurve`: four control points and radii.
+#[derive(Clone, Debug)]
+pub struct SplineSegment {
+    /// Control points (world space).
+    pub p: [Vec3A; 4],
+    /// Radii.
+    pub r: [f32; 4],
+}
+
+/// The spline's centre, radius and derivatives at a parameter.
+struct SplineAt {
+    c: DVec3,
+    dc: DVec3,
+    ddc: DVec3,
+    dddc: DVec3,
+    r: f64,
+    dr: f64,
+}
+
+impl SplineSegment {
+    /// Uniform cubic B-spline basis and its derivatives at v in [0, 1], as Mitsuba's.
+    fn at(&self, v: f64) -> SplineAt {
+        let (v2, v3) = (v * v, v * v * v);
+        let b = [
+            (-v3 + 3.0 * v2 - 3.0 * v + 1.0) / 6.0,
+            (3.0 * v3 - 6.0 * v2 + 4.0) / 6.0,
+            (-3.0 * v3 + 3.0 * v2 + 3.0 * v + 1.0) / 6.0,
+            v3 / 6.0,
+        ];
+        let db = [
+            (-3.0 * v2 + 6.0 * v - 3.0) / 6.0,
+            (9.0 * v2 - 12.0 * v) / 6.0,
+            (-9.0 * v2 + 6.0 * v + 3.0) / 6.0,
+            3.0 * v2 / 6.0,
+        ];
+        let ddb = [1.0 - v, 3.0 * v - 2.0, 1.0 - 3.0 * v, v];
+        let dddb = [-1.0, 3.0, -3.0, 1.0];
+        let p = self.p.map(|q| q.as_dvec3());
+        let r = self.r.map(|x| x as f64);
+        let sum = |w: [f64; 4]| p[0] * w[0] + p[1] * w[1] + p[2] * w[2] + p[3] * w[3];
+        let sumr = |w: [f64; 4]| r[0] * w[0] + r[1] * w[1] + r[2] * w[2] + r[3] * w[3];
+        SplineAt {
+            c: sum(b),
+            dc: sum(db),
+            ddc: sum(ddb),
+            dddc: sum(dddb),
+            r: sumr(b),
+            dr: sumr(db),
+        }
+    }
+
+    /// The centre-line point and radius at v, for the linear pieces.
+    pub fn point(&self, v: f32) -> (Vec3A, f32) {
+        let a = self.at(v as f64);
+        (a.c.as_vec3a(), a.r as f32)
+    }
+
+    /// The parameter in [0, 1] of the sphere touching the sweep at point `p`, from `v`: Newton's
+    /// method on (p − c)·c′ + r r′ = 0, the stationary point of |p − c|² − r².
+    fn touching(&self, p: DVec3, mut v: f64) -> f64 {
+        for _ in 0..8 {
+            let a = self.at(v);
+            let q = p - a.c;
+            let g = q.dot(a.dc) + a.r * a.dr;
+            // d/dv of g, with r″ left out (its term r·r″ is small against |c′|²).
+            let dg = q.dot(a.ddc) - a.dc.dot(a.dc) + a.dr * a.dr;
+            if dg == 0.0 {
+                break;
+            }
+            let next = (v - g / dg).clamp(0.0, 1.0);
+            if (next - v).abs() < 1e-9 {
+                v = next;
+                break;
+            }
+            v = next;
+        }
+        v
+    }
 }
 
 /// The segment's sweep in its own terms: unit axis, length, and the radius' slope along it.
@@ -105,7 +198,11 @@ impl CurveSegment {
             }
         }
         // The caps: where the touching sphere would lie beyond an end.
-        for (end, c, r) in [(0.0, s.p0, s.r0), (s.len, self.p[1].as_dvec3(), self.r[1] as f64)] {
+        let ends = [(0.0, s.p0, s.r0), (s.len, self.p[1].as_dvec3(), self.r[1] as f64)];
+        for ((end, c, r), cap) in ends.into_iter().zip(self.caps) {
+            if !cap {
+                continue;
+            }
             if let Some(t) = sphere_entry(o, d, c, r) {
                 let z = s.touching(o + d * t);
                 if (end == 0.0 && z <= 0.0) || (end > 0.0 && z >= s.len) {
@@ -120,6 +217,9 @@ impl CurveSegment {
     /// sphere touching there, u the angle about the axis in Mitsuba's frame, v along all of the
     /// shape's segments.
     pub fn surface(&self, p_near: Vec3A) -> SurfacePoint {
+        if let Some((spline, span)) = &self.spline {
+            return self.spline_surface(spline, *span, p_near);
+        }
         let s = self.sweep();
         let pd = p_near.as_dvec3();
         let v_local = if s.k.abs() >= 1.0 || s.len == 0.0 {
@@ -151,6 +251,74 @@ impl CurveSegment {
             attr: Vec3A::ZERO,
             dpdu: axis.cross(p - centre) * (2.0 * PI),
             dpdv: ((self.p[1] - self.p[0]) + n * (self.r[1] - self.r[0])) * segments,
+        }
+    }
+}
+
+impl CurveSegment {
+    /// [`CurveSegment::surface`] on the B-spline sweep a piece approximates, as Mitsuba's
+    /// `bsplinecurve` gives it: the normal (|c′|² − (p − c)·c″)(p − c) − r r′ c′, u about the
+    /// tangent in Mitsuba's frame, v over all segments, and ∂p/∂u and ∂p/∂v from the
+    /// Frenet–Serret frame.
+    fn spline_surface(&self, spline: &SplineSegment, [v0, v1]: [f32; 2], p_near: Vec3A) -> SurfacePoint {
+        let s = self.sweep();
+        let pd = p_near.as_dvec3();
+        let piece = if s.len > 0.0 && s.k.abs() < 1.0 {
+            (s.touching(pd) / s.len).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        let v = spline.touching(pd, v0 as f64 + (v1 - v0) as f64 * piece);
+        let a = spline.at(v);
+        let rad_vec = pd - a.c;
+        let mut n =
+            (rad_vec * (a.dc.dot(a.dc) - rad_vec.dot(a.ddc)) - a.dc * (a.dr * a.r)).normalize_or_zero();
+        if n == DVec3::ZERO {
+            n = any_perpendicular(a.dc.normalize_or(DVec3::Z));
+        }
+        let rad = rad_vec.normalize_or(n);
+        let p = a.c + n * a.r;
+        let t = a.dc.normalize_or(DVec3::Z);
+        let (u_rot, u_rad) = local_frame(t.as_vec3a());
+        let rad32 = rad.as_vec3a();
+        let u = super::azimuth(u_rot.dot(rad32), u_rad.dot(rad32)) / (2.0 * PI);
+        // Frenet–Serret frame, as Mitsuba's partials build it.
+        let speed = a.dc.length();
+        let cross = a.dc.cross(a.ddc);
+        let cross_len = cross.length();
+        let mut kappa = cross_len / (speed * speed * speed);
+        let mut tau = if cross_len < 1e-6 || a.dddc.length() < 1e-6 {
+            0.0
+        } else {
+            a.dddc.dot(cross) / (cross_len * cross_len)
+        };
+        let (fn_, fb) = if kappa < f32::EPSILON as f64 || cross_len == 0.0 {
+            kappa = 0.0;
+            tau = 0.0;
+            let f = super::Frame::from_normal(t.as_vec3a());
+            (f.s.as_dvec3(), f.t.as_dvec3())
+        } else {
+            let fn_ = cross.cross(a.dc).normalize();
+            (fn_, t.cross(fn_).normalize())
+        };
+        let (cos, sin) = (fn_.dot(rad), fb.dot(rad));
+        let radu = fn_ * -sin + fb * cos;
+        let radv = (t * -kappa + fb * tau) * (speed * cos) + fn_ * (-tau * speed * sin);
+        let segments = self.segments as f64;
+        let dpdu = radu * (a.r * 2.0 * std::f64::consts::PI);
+        let dpdv = (a.dc + rad * a.dr + radv * a.r) * segments;
+        let p32 = p.as_vec3a();
+        let n32 = n.as_vec3a();
+        SurfacePoint {
+            p: p32,
+            p_err: gamma(16) * (p32.abs() + Vec3A::splat(a.r as f32)),
+            ng: n32,
+            ns: n32,
+            shape: self.shape,
+            uv: Vec2::new(u, ((v + self.index as f64) / segments) as f32),
+            attr: Vec3A::ZERO,
+            dpdu: dpdu.as_vec3a(),
+            dpdv: dpdv.as_vec3a(),
         }
     }
 }
@@ -220,6 +388,8 @@ mod tests {
             shape: 0,
             index: 1,
             segments: 2,
+            caps: [true; 2],
+            spline: None,
         }
     }
 
@@ -278,6 +448,8 @@ mod tests {
             shape: 0,
             index: 0,
             segments: 1,
+            caps: [true; 2],
+            spline: None,
         };
         let ray = Ray::new(Vec3A::new(0.0, 5.0, 0.0), -Vec3A::Y);
         assert!((s.intersect(&ray, f32::INFINITY).unwrap() - 4.0).abs() < 1e-5);

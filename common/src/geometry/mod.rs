@@ -14,7 +14,7 @@ mod triangle;
 
 pub use aabb::Aabb;
 pub use bvh::{Backend, Bvh};
-pub use curve::CurveSegment;
+pub use curve::{CurveSegment, SPLINE_PIECES, SplineSegment};
 pub use cylinder::Cylinder;
 pub use frame::Frame;
 pub use instance::Instance;

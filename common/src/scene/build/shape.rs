@@ -7,7 +7,9 @@ use glam::{Mat4, Vec3A};
 
 use crate::bsdf::{Bsdf, Diffuse};
 use crate::color::Rgb;
-use crate::geometry::{Bvh, CurveSegment, Cylinder, Instance, Primitive, Sphere, Triangle};
+use crate::geometry::{
+    Bvh, CurveSegment, Cylinder, Instance, Primitive, SPLINE_PIECES, Sphere, SplineSegment, Triangle,
+};
 use crate::scene::ShapeInfo;
 use crate::scene::mesh::{self, Attribute, Mesh};
 use crate::scene::props::{Props, Res};
@@ -86,7 +88,7 @@ impl Builder<'_> {
                 })));
                 None
             }
-            "linearcurve" => {
+            "linearcurve" | "bsplinecurve" => {
                 if flip {
                     return Err(p.err_at("flip_normals", "a curve's normals cannot be flipped".into()));
                 }
@@ -96,9 +98,13 @@ impl Builder<'_> {
                 let path = p.resolve_file("filename", name)?;
                 let curves = std::fs::read_to_string(&path)
                     .map_err(|e| e.to_string())
-                    .and_then(|text| crate::scene::curves::parse(&text, 2))
+                    .and_then(|text| {
+                        crate::scene::curves::parse(&text, if kind == "linearcurve" { 2 } else { 4 })
+                    })
                     .map_err(|m| p.err_at("filename", format!("{}: {m}", path.display())))?;
-                let segments: u32 = curves.iter().map(|c| c.len() as u32 - 1).sum();
+                // A linear segment joins two control points, a cubic one spans four.
+                let span = if kind == "linearcurve" { 2 } else { 4 };
+                let segments: u32 = curves.iter().map(|c| (c.len() + 1 - span) as u32).sum();
                 let mut i = 0;
                 for curve in &curves {
                     // Mitsuba moves the control points by to_world and keeps their radii.
@@ -106,14 +112,43 @@ impl Builder<'_> {
                         .iter()
                         .map(|(q, r)| (to_world.transform_point3(glam::Vec3::from(*q)).into(), *r))
                         .collect();
-                    for pair in points.windows(2) {
-                        self.prims.push(Primitive::Curve(Box::new(CurveSegment {
-                            p: [pair[0].0, pair[1].0],
-                            r: [pair[0].1, pair[1].1],
-                            shape: index,
-                            index: i,
-                            segments,
-                        })));
+                    let last = points.len() - span;
+                    for (j, w) in points.windows(span).enumerate() {
+                        let segment = |p: [Vec3A; 2], r: [f32; 2], caps, spline| {
+                            Primitive::Curve(Box::new(CurveSegment {
+                                p,
+                                r,
+                                shape: index,
+                                index: i,
+                                segments,
+                                caps,
+                                spline,
+                            }))
+                        };
+                        if span == 2 {
+                            self.prims
+                                .push(segment([w[0].0, w[1].0], [w[0].1, w[1].1], [true; 2], None));
+                        } else {
+                            let spline = Arc::new(SplineSegment {
+                                p: [w[0].0, w[1].0, w[2].0, w[3].0],
+                                r: [w[0].1, w[1].1, w[2].1, w[3].1],
+                            });
+                            for k in 0..SPLINE_PIECES {
+                                let v = [
+                                    k as f32 / SPLINE_PIECES as f32,
+                                    (k + 1) as f32 / SPLINE_PIECES as f32,
+                                ];
+                                let (a, b) = (spline.point(v[0]), spline.point(v[1]));
+                                // Mitsuba's B-spline curves are open: no caps at their ends.
+                                let caps = [j > 0 || k > 0, j < last || k + 1 < SPLINE_PIECES];
+                                self.prims.push(segment(
+                                    [a.0, b.0],
+                                    [a.1, b.1],
+                                    caps,
+                                    Some((spline.clone(), v)),
+                                ));
+                            }
+                        }
                         i += 1;
                     }
                 }
@@ -165,7 +200,7 @@ impl Builder<'_> {
                     el,
                     format!(
                         "shape type \"{other}\" is not supported (sphere, cylinder, rectangle, cube, disk, obj, ply, \
-                         serialized, linearcurve, shapegroup, instance)"
+                         serialized, linearcurve, bsplinecurve, shapegroup, instance)"
                     ),
                 ));
             }
@@ -267,7 +302,7 @@ impl Builder<'_> {
             if ep.kind()? != "area" {
                 return Err(self.ctx.err(em, "a shape can only carry an area emitter"));
             }
-            if kind == "linearcurve" {
+            if kind.ends_with("curve") {
                 return Err(self.ctx.err(
                     em,
                     "a curve cannot be an emitter (Mitsuba cannot sample points on one)",
