@@ -164,17 +164,7 @@ impl Builder<'_> {
                         ));
                     }
                 };
-                let wrap = match p.string("wrap_mode")? {
-                    None | Some("clamp") => Wrap::Clamp,
-                    Some("repeat") => Wrap::Repeat,
-                    Some("mirror") => Wrap::Mirror,
-                    Some(w) => {
-                        return Err(p.err_at(
-                            "wrap_mode",
-                            format!("wrap_mode \"{w}\" is not supported (clamp, repeat, mirror)"),
-                        ));
-                    }
-                };
+                let wrap = super::texture::wrap_mode(&p, Wrap::Clamp)?;
                 let use_grid_bbox = p.boolean("use_grid_bbox")?.unwrap_or(false);
                 // Spectral upsampling and GPU textures in Mitsuba: no effect on RGB values.
                 let _ = (p.boolean("raw")?, p.boolean("accel")?);

@@ -83,17 +83,7 @@ impl Builder<'_> {
                         ));
                     }
                 };
-                let wrap = match p.string("wrap_mode")? {
-                    None | Some("repeat") => Wrap::Repeat,
-                    Some("mirror") => Wrap::Mirror,
-                    Some("clamp") => Wrap::Clamp,
-                    Some(w) => {
-                        return Err(p.err_at(
-                            "wrap_mode",
-                            format!("wrap_mode \"{w}\" is not supported (repeat, mirror, clamp)"),
-                        ));
-                    }
-                };
+                let wrap = wrap_mode(&p, Wrap::Repeat)?;
                 let raw = p.boolean("raw")?.unwrap_or(false);
                 // Storage precision and GPU filtering in Mitsuba: no effect on the values.
                 let _ = (p.string("format")?, p.boolean("accel")?);
@@ -148,6 +138,22 @@ impl Builder<'_> {
         p.finish()?;
         Ok(texture)
     }
+}
+
+/// A `wrap_mode` parameter (bitmaps default to `repeat`, grid volumes to `clamp`).
+pub(super) fn wrap_mode(p: &Props, default: Wrap) -> Res<Wrap> {
+    Ok(match p.string("wrap_mode")? {
+        None => default,
+        Some("repeat") => Wrap::Repeat,
+        Some("mirror") => Wrap::Mirror,
+        Some("clamp") => Wrap::Clamp,
+        Some(w) => {
+            return Err(p.err_at(
+                "wrap_mode",
+                format!("wrap_mode \"{w}\" is not supported (repeat, mirror, clamp)"),
+            ));
+        }
+    })
 }
 
 /// The 2D part of a `to_uv` transform (Mitsuba applies the 4x4 matrix to (u, v, 0, 1) and keeps
