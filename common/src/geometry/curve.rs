@@ -167,7 +167,7 @@ impl CurveSegment {
                 best = t;
             }
         };
-        if s.k.abs() >= 1.0 || s.len == 0.0 {
+        if s.is_one_sphere() {
             // One end sphere holds the other: the segment is the larger sphere.
             let (c, r) = if self.r[1] > self.r[0] {
                 (self.p[1].as_dvec3(), self.r[1] as f64)
@@ -222,7 +222,7 @@ impl CurveSegment {
         }
         let s = self.sweep();
         let pd = p_near.as_dvec3();
-        let v_local = if s.k.abs() >= 1.0 || s.len == 0.0 {
+        let v_local = if s.is_one_sphere() {
             if self.r[1] > self.r[0] { 1.0 } else { 0.0 }
         } else {
             (s.touching(pd) / s.len).clamp(0.0, 1.0)
@@ -263,7 +263,7 @@ impl CurveSegment {
     fn spline_surface(&self, spline: &SplineSegment, [v0, v1]: [f32; 2], p_near: Vec3A) -> SurfacePoint {
         let s = self.sweep();
         let pd = p_near.as_dvec3();
-        let piece = if s.len > 0.0 && s.k.abs() < 1.0 {
+        let piece = if !s.is_one_sphere() {
             (s.touching(pd) / s.len).clamp(0.0, 1.0)
         } else {
             0.5
@@ -324,6 +324,12 @@ impl CurveSegment {
 }
 
 impl Sweep {
+    /// Whether one end sphere holds the other (|Δr| ≥ length, or no length): then the segment
+    /// is the larger sphere and has no cone.
+    fn is_one_sphere(&self) -> bool {
+        self.k.abs() >= 1.0 || self.len == 0.0
+    }
+
     /// The centre-line distance from p0 of the sphere of the sweep (extended beyond the ends)
     /// that touches the envelope at point `p`: x + k·y/√(1 − k²) for axial x and radial y.
     fn touching(&self, p: DVec3) -> f64 {

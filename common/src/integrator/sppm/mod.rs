@@ -129,6 +129,11 @@ pub enum SppmError {
     VaryingMedium(&'static str),
 }
 
+/// Whether every medium of the scene is the same everywhere (what the beam estimates need).
+fn media_are_uniform(scene: &Scene) -> bool {
+    scene.media.iter().all(|m| m.is_uniform())
+}
+
 impl SppmSettings {
     /// Checks the parameters.
     pub fn validate(&self) -> Result<(), SppmError> {
@@ -158,7 +163,7 @@ impl SppmSettings {
             VolumeEstimate::Beam => "beam",
             VolumeEstimate::PhotonBeams => "photon-beams",
         };
-        if scene.media.iter().all(|m| m.is_uniform()) {
+        if media_are_uniform(scene) {
             Ok(())
         } else {
             Err(SppmError::VaryingMedium(name))
@@ -170,7 +175,7 @@ impl SppmSettings {
     /// with a medium that varies in space gets the point estimate, the one that handles it.
     pub fn from_scene(scene: &Scene) -> SppmSettings {
         let decl = &scene.integrator;
-        let estimate = if scene.media.iter().all(|m| m.is_uniform()) {
+        let estimate = if media_are_uniform(scene) {
             VolumeEstimate::default()
         } else {
             VolumeEstimate::Point
