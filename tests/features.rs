@@ -17,6 +17,7 @@
 //! Criteria, as for the shared references: channel means within 1%, and at 256 spp an MSE no
 //! worse than 1.25 times Mitsuba's median.
 
+use photonfarm::integrator::sppm::VolumeEstimate;
 use photonfarm_tests::{check_path_against_mitsuba, mitsuba_mse};
 
 fn check(name: &str) {
@@ -159,11 +160,14 @@ fn mesh_attributes_match_mitsuba() {
 
 /// Delta tracking and ratio tracking through a chromatic density grid with an albedo grid, under
 /// an area light and a point light (sampled equiangularly, weighted by ratio tracking), beside
-/// homogeneous fog with a repeated albedo grid; SPPM with the point estimate, its default here.
+/// homogeneous fog with a repeated albedo grid; SPPM with the beam estimate (transmittance by
+/// ratio tracking along the camera ray) and with the point estimate.
 #[test]
 fn heterogeneous_media_match_mitsuba() {
     photonfarm_tests::check_declared_against_mitsuba("heterogeneous");
-    photonfarm_tests::check_sppm_convergence("heterogeneous");
+    for estimate in [VolumeEstimate::Beam, VolumeEstimate::Point] {
+        photonfarm_tests::check_sppm_estimate_convergence("heterogeneous", Some(estimate));
+    }
 }
 
 /// `rawconstant.xml`: Mitsuba's `rawconstant` as a constant normal map that tilts every shading

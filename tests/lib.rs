@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use photonfarm::color::Rgb;
 use photonfarm::film::{FilmSum, read_image};
 use photonfarm::integrator::path::PathSettings;
-use photonfarm::integrator::sppm::SppmSettings;
+use photonfarm::integrator::sppm::{SppmSettings, VolumeEstimate};
 use photonfarm::job::JobSettings;
 use photonfarm::render::{Method, RenderSettings, Renderer};
 use photonfarm::scene::Scene;
@@ -225,9 +225,18 @@ pub fn check_path_against_mitsuba(scene: &str, exr: &str, res: &str, spp: u64, m
 /// iterations every channel mean within 2%, and the MSE under half that at 8 iterations
 /// (variance and bias both fall; pure variance would give a factor 8).
 pub fn check_sppm_convergence(name: &str) {
+    check_sppm_estimate_convergence(name, None);
+}
+
+/// [`check_sppm_convergence`] with the volume estimate `estimate` (None: the scene's default).
+pub fn check_sppm_estimate_convergence(name: &str, estimate: Option<VolumeEstimate>) {
     let scene = load(&refs_dir().join(format!("{name}.xml")), &[]);
-    let settings = sppm_settings(&scene, 100_000);
-    check_convergence(&format!("{name}, SPPM"), name, (8, 64), 0.02, |n| {
+    let mut settings = sppm_settings(&scene, 100_000);
+    if let Some(estimate) = estimate {
+        settings = settings.with_volume_estimate(estimate);
+    }
+    let label = format!("{name}, SPPM, {:?} estimate", settings.volume_estimate);
+    check_convergence(&label, name, (8, 64), 0.02, |n| {
         render_sppm(&scene, settings, n, 1)
     });
 }

@@ -308,10 +308,10 @@ mod tests {
         assert_eq!(Integrator::from_name("volpath"), None);
     }
 
-    /// A heterogeneous medium gets SPPM's point estimate; the beam estimates, which integrate
-    /// uniform media in closed form, are refused for it with a message saying what to use.
+    /// A heterogeneous medium gets SPPM's default beam estimate; photon beams, which follow
+    /// photon flights in closed form, are refused for it with a message saying what to use.
     #[test]
-    fn media_that_vary_take_the_point_estimate() {
+    fn photon_beams_are_refused_where_density_varies() {
         let scene = Scene::from_str(
             r#"<scene version="3.0.0">
             <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
@@ -333,18 +333,18 @@ mod tests {
         let Method::Sppm(s) = resolved.render.method else {
             panic!("not SPPM");
         };
-        assert_eq!(s.volume_estimate, VolumeEstimate::Point);
-        for estimate in [VolumeEstimate::Beam, VolumeEstimate::PhotonBeams] {
-            let e = sppm(Some(estimate))
-                .resolve(&scene, false)
-                .unwrap_err()
-                .to_string();
-            assert!(
-                e.contains("use the point estimate (--volume-estimate point"),
-                "{e}"
-            );
+        assert_eq!(s.volume_estimate, VolumeEstimate::Beam);
+        let e = sppm(Some(VolumeEstimate::PhotonBeams))
+            .resolve(&scene, false)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("use --volume-estimate beam (the default) or point"),
+            "{e}"
+        );
+        for estimate in [VolumeEstimate::Beam, VolumeEstimate::Point] {
+            assert!(sppm(Some(estimate)).resolve(&scene, false).is_ok());
         }
-        assert!(sppm(Some(VolumeEstimate::Point)).resolve(&scene, false).is_ok());
     }
 
     #[test]

@@ -133,12 +133,12 @@ impl Medium {
     }
 
     /// The density grid, for a heterogeneous medium.
-    fn density(&self) -> Option<&Density> {
+    pub fn density(&self) -> Option<&Density> {
         self.grids.as_ref()?.density.as_ref()
     }
 
-    /// Whether σt and the albedo are the same everywhere: what the closed forms of the beam
-    /// estimates (SPPM's `beam` and `photon-beams`) need.
+    /// Whether σt and the albedo are the same everywhere, so that an estimate along a ray can
+    /// take them out of its sums.
     pub fn is_uniform(&self) -> bool {
         self.grids.is_none()
     }
@@ -319,6 +319,23 @@ impl Density {
     /// Ratio tracking: the product of (1 − σt/μ) over the tentative collisions, an unbiased
     /// estimate of the transmittance in every channel.
     fn ratio_tracking(&self, ray: &Ray, t_max: f32, sampler: &mut Sampler) -> Rgb {
+        self.ratio_steps(ray, t_max, 0.0, sampler, |_, _| {})
+    }
+
+    /// Ratio tracking that reports every tentative collision: `step(t, tr)` with the estimate
+    /// from the ray's origin to just past t, so that the running product is an unbiased
+    /// estimate at every distance at once (what an estimate integrated along the ray needs).
+    /// Below `roulette` in its largest channel the estimate survives each further collision
+    /// with probability max(tr)/`roulette`, divided by it; 0 plays no roulette (and draws no
+    /// extra random numbers). Returns the estimate at `t_max`; a zero step is the last.
+    pub fn ratio_steps(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        roulette: f32,
+        sampler: &mut Sampler,
+        mut step: impl FnMut(f32, Rgb),
+    ) -> Rgb {
         let mu = self.majorant;
         let Some((mut t, end)) = self.grid.bbox().clip(ray, t_max).filter(|_| mu > 0.0) else {
             return Rgb::ONE;
@@ -330,11 +347,52 @@ impl Density {
                 return tr;
             }
             tr *= (Rgb::ONE - self.sigma_t_at(ray.at(t)) / mu).max(Rgb::ZERO);
+            let largest = tr.max_element();
+            if largest < roulette {
+                let q = largest / roulette;
+                tr = if sampler.next_1d() < q { tr / q } else { Rgb::ZERO };
+            }
+            step(t, tr);
             if tr == Rgb::ZERO {
                 return tr;
             }
         }
+        step(t, Rgb::ZERO);
         Rgb::ZERO
+    }
+}
+
+/// Two voxels along x over [0, 2] × [0, 1]², σt `first` on the first and `second` on the
+/// second, times `scale`, looked up nearest; the majorant is the largest σt.
+#[cfg(test)]
+pub(crate) fn two_voxels(first: Rgb, second: Rgb, scale: f32) -> Medium {
+    use crate::texture::Wrap;
+    use crate::volume::{GridVolume, VolumeData, VolumeFilter};
+    let mut bytes = b"VOL\x03".to_vec();
+    for i in [1i32, 2, 1, 1, 3] {
+        bytes.extend(i.to_le_bytes());
+    }
+    let values = [first.to_array(), second.to_array()].concat();
+    for f in [[0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0].as_slice(), &values].concat() {
+        bytes.extend(f.to_le_bytes());
+    }
+    let data = VolumeData::parse(&bytes).unwrap();
+    let to_world = glam::Affine3A::from_scale(glam::Vec3::new(2.0, 1.0, 1.0));
+    let grid = GridVolume::new(data, to_world, false, VolumeFilter::Nearest, Wrap::Clamp);
+    Medium {
+        grids: Some(Box::new(Grids {
+            density: Some(Density {
+                grid,
+                scale,
+                majorant: first.max(second).max_element() * scale,
+            }),
+            albedo: None,
+        })),
+        ..Medium::homogeneous(
+            Rgb::splat(first.max(second).max_element() * scale),
+            Rgb::ONE,
+            Phase::Isotropic,
+        )
     }
 }
 
@@ -461,32 +519,9 @@ mod tests {
     #[test]
     fn delta_and_ratio_tracking_are_unbiased_per_channel() {
         use crate::geometry::Ray;
-        use crate::texture::Wrap;
-        use crate::volume::{GridVolume, VolumeData, VolumeFilter};
-        // Two voxels along x over [0, 2]: σt (1, 2, 0) on the first, (3, 0.5, 0) on the second,
-        // scaled by 0.5. A ray along x from x = −1 to x = 1.5 crosses 1 of the first and 0.5 of
-        // the second: τ = 0.5 · (1 + 1.5, 2 + 0.25, 0).
-        let mut bytes = b"VOL\x03".to_vec();
-        for i in [1i32, 2, 1, 1, 3] {
-            bytes.extend(i.to_le_bytes());
-        }
-        for f in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 2.0, 0.0, 3.0, 0.5, 0.0] {
-            bytes.extend(f.to_le_bytes());
-        }
-        let data = VolumeData::parse(&bytes).unwrap();
-        let to_world = glam::Affine3A::from_scale(glam::Vec3::new(2.0, 1.0, 1.0));
-        let grid = GridVolume::new(data, to_world, false, VolumeFilter::Nearest, Wrap::Clamp);
-        let m = Medium {
-            grids: Some(Box::new(Grids {
-                density: Some(Density {
-                    grid,
-                    scale: 0.5,
-                    majorant: 1.5,
-                }),
-                albedo: None,
-            })),
-            ..Medium::homogeneous(Rgb::splat(1.5), Rgb::ONE, Phase::Isotropic)
-        };
+        // A ray along x from x = −1 to x = 1.5 crosses 1 of the first voxel and 0.5 of the
+        // second: τ = 0.5 · (1 + 1.5, 2 + 0.25, 0).
+        let m = two_voxels(Rgb::new(1.0, 2.0, 0.0), Rgb::new(3.0, 0.5, 0.0), 0.5);
         let ray = Ray::new(Vec3A::new(-1.0, 0.5, 0.5), Vec3A::X);
         let expect = (-Rgb::new(1.25, 1.125, 0.0)).exp();
         let mut s = Sampler::new(4, Stream::Photon, 0, 0);

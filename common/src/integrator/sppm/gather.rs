@@ -15,11 +15,13 @@ use glam::Vec3A;
 use super::beam_map::BeamMap;
 use super::photon_beams::PhotonBeamMap;
 use super::photon_map::PhotonMap;
+use super::ray_transmittance::RayTransmittance;
 use crate::bsdf::TransportMode;
 use crate::color::Rgb;
 use crate::geometry::Ray;
 use crate::integrator::direct;
 use crate::integrator::walk::{Event, Hit, Walk};
+use crate::medium::Flight;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 
@@ -179,33 +181,21 @@ fn volume_estimate(ctx: &GatherContext, map: &PhotonMap, p: Vec3A, d: Vec3A, m: 
     sum * inv_sigma * (ctx.power_unit / volume)
 }
 
-/// Below this transmittance (from the stretch's start, in its clearest channel) the beam
-/// estimate plays Russian roulette with the rest of the stretch: in a dense medium, photons far
-/// along the ray contribute almost nothing and would cost as much as the near ones.
-const BEAM_ROULETTE_BELOW: f32 = 0.1;
-
 /// Light scattered towards the camera along `ray.at(0..t_max)` in medium `m`, per unit
 /// throughput at the ray's origin, and the throughput's factor over the stretch: the integral
 /// over the segment of what the point estimate gives at each of its points (times
-/// transmittance and σs), computed exactly for the volume photons and by one sampled collision
-/// for direct light.
+/// transmittance and σs), computed for the volume photons with the transmittance along the ray
+/// ([`RayTransmittance`]: exact, or one ratio-tracking pass where the density varies) and by one
+/// sampled collision for direct light.
 ///
 /// A photon's sphere adds phase · Φ · albedo · ∫ Tr dt over its chord / ((4/3)π r³): the
 /// point estimate's 1/σt cancels the σt of the scattering rate, and the chord's length
 /// 2√(r² − d²) over the ball's volume is the projected-sphere kernel across the ray, which
-/// integrates to one over the disk of radius r (Jarosz et al. 2008, with this kernel).
-///
-/// Past a transmittance of [`BEAM_ROULETTE_BELOW`] the stretch survives to distance t with
-/// probability S(t) = Tr_max(t) / 0.1, decided by one random number for the whole stretch: a
-/// photon counts if S survives to its chord's start a, with weight 1/S(a), and the surface
-/// behind with Tr/S; unbiased, and the march ends where S does.
+/// integrates to one over the disk of radius r (Jarosz et al. 2008, with this kernel). Where
+/// the albedo varies, it is read at the photon.
 fn beam_estimate(ctx: &GatherContext, ray: &Ray, m: u32, t_max: f32, sampler: &mut Sampler) -> (Rgb, Rgb) {
     let scene = ctx.scene;
     let med = &scene.media[m as usize];
-    debug_assert!(
-        med.is_uniform(),
-        "the job refuses beam estimates in media that vary"
-    );
     // Direct light (which photons do not store) at a collision drawn within the segment:
     // equiangularly about a point light (its 1/d² would give the exponential's samples
     // unbounded variance near the light), else by transmittance within the part the light
@@ -219,67 +209,61 @@ fn beam_estimate(ctx: &GatherContext, ray: &Ray, m: u32, t_max: f32, sampler: &m
     let mut l = Rgb::ZERO;
     if let Some((li, pmf)) = scene.pick_light(u_sel) {
         let light = &scene.lights[li as usize];
-        // Else by transmittance, within the stretch the light reaches (a beam's cylinder).
+        // Else by transmittance, within the stretch the light reaches (a beam's cylinder):
+        // in closed form, or by delta tracking from the stretch's start.
         let collision = direct::equiangular_collision(light, med, ray, t_max, u_t, sampler).or_else(|| {
             let (a, b) = light.lit_span(ray, t_max)?;
-            let (t, weight) = med.sample_collision_within(b - a, u_channel, u_t)?;
-            Some((a + t, weight * med.transmittance(a)))
+            if med.density().is_none() {
+                let (t, weight) = med.sample_collision_within(b - a, u_channel, u_t)?;
+                return Some((a + t, weight * med.transmittance(a)));
+            }
+            let to_a = med.transmittance_along(ray, a, sampler);
+            match med.sample_flight_along(&Ray::new(ray.at(a), ray.d), b - a, sampler) {
+                Flight::Collision { t, weight } => Some((a + t, weight * to_a)),
+                Flight::Passed { .. } => None,
+            }
         });
         if let Some(collision) = collision {
             l += direct::scattered_at(scene, ray, m, (li, pmf), collision, u_light, sampler);
         }
     }
-    // The roulette: survival S(t) and the distance where it fails.
-    let sigma_min = med.sigma_t.min_element();
-    let u_cut = sampler.next_1d();
-    let survival = |t: f32| {
-        if sigma_min > 0.0 {
-            (libm::expf(-sigma_min * t) / BEAM_ROULETTE_BELOW).min(1.0)
-        } else {
-            1.0
-        }
-    };
-    let t_cut = if sigma_min > 0.0 {
-        -libm::logf(u_cut * BEAM_ROULETTE_BELOW) / sigma_min
-    } else {
-        f32::INFINITY
-    };
+    let tr = RayTransmittance::new(med, ray, t_max, sampler);
+    let t_stop = tr.t_stop();
+    // Where the albedo is one for the medium, it is taken out of the sums (ONE multiplies
+    // exactly, so uniform media keep their bits).
+    let uniform = med.is_uniform();
+    let albedo = |p: Vec3A| if uniform { Rgb::ONE } else { med.albedo_at(p) };
     let r = ctx.volume_radius;
     match ctx.volume_map {
         VolumeMap::Beam(spheres) => {
             let mut sum = Rgb::ZERO;
-            spheres.for_each_on_segment(ray, t_max, t_cut, |ph, a, b| {
-                let tr = med.integrated_transmittance(a, b) / survival(a);
-                sum += ph.power * tr * med.phase.eval(ray.d, ph.direction);
+            spheres.for_each_on_segment(ray, t_max, t_stop, |ph, a, b| {
+                sum += ph.power * tr.over(a, b) * med.phase.eval(ray.d, ph.direction) * albedo(ph.position);
             });
             if sum != Rgb::ZERO {
-                l += sum * med.albedo * (ctx.power_unit / (4.0 / 3.0 * PI * r * r * r));
+                let albedo = if uniform { med.albedo } else { Rgb::ONE };
+                l += sum * albedo * (ctx.power_unit / (4.0 / 3.0 * PI * r * r * r));
             }
         }
         // A flight's power at distance s along it is Φ·Tr(s)/P(flight > s) (it was ended at
         // a sampled collision), scattered with σs and the phase function at the ray's point
         // nearest it, through the 1D kernel 1/(2r) across both, over the sine of their angle
-        // (Jarosz et al. 2011, "beam × beam 1D").
+        // (Jarosz et al. 2011, "beam × beam 1D"). The job refuses them where density varies.
         VolumeMap::PhotonBeams(flights) => {
             let mut sum = Rgb::ZERO;
-            flights.for_each_near_ray(ray, m, t_max, t_cut, |seg, c| {
+            flights.for_each_near_ray(ray, m, t_max, t_stop, |seg, c| {
                 let along = med.transmittance(c.s) / med.flight_survival(c.s);
-                let to_camera = med.transmittance(c.t) / survival(c.t);
-                sum += seg.power * along * to_camera * (med.phase.eval(ray.d, -seg.direction) / c.sin);
+                let scatter = med.phase.eval(ray.d, -seg.direction) / c.sin;
+                sum += seg.power * along * tr.at(c.t) * scatter * albedo(ray.at(c.t));
             });
             if sum != Rgb::ZERO {
-                l += sum * med.sigma_t * med.albedo * (ctx.power_unit / (2.0 * r));
+                let albedo = if uniform { med.albedo } else { Rgb::ONE };
+                l += sum * med.sigma_t * albedo * (ctx.power_unit / (2.0 * r));
             }
         }
         VolumeMap::Point(_) => {}
     }
-    let s_end = survival(t_max);
-    let transmitted = if (t_max < t_cut || t_cut == f32::INFINITY) && s_end > 0.0 {
-        med.transmittance(t_max) / s_end
-    } else {
-        Rgb::ZERO
-    };
-    (l, transmitted)
+    (l, tr.at_end(t_max))
 }
 
 #[cfg(test)]

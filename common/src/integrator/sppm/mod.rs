@@ -13,6 +13,7 @@ mod photon;
 mod photon_beams;
 mod photon_map;
 mod radius;
+mod ray_transmittance;
 mod trace;
 
 pub use beam_map::BeamMap;
@@ -122,16 +123,16 @@ pub enum SppmError {
     /// A volume radius ratio that is not a positive number.
     #[error("the volume radius ratio must be a positive number, not {0}")]
     VolumeRatio(f32),
-    /// A beam estimate asked for in a scene whose media vary in space.
+    /// Photon beams asked for in a scene whose media vary in density.
     #[error(
-        "the {0} volume estimate integrates homogeneous media of constant albedo in closed form, and this scene has a medium whose density or albedo varies: use the point estimate (--volume-estimate point, the default for such scenes)"
+        "the photon-beams volume estimate follows photon flights in closed form, which needs media of constant density, and this scene has a medium whose density varies: use --volume-estimate beam (the default) or point"
     )]
-    VaryingMedium(&'static str),
+    VaryingDensity,
 }
 
-/// Whether every medium of the scene is the same everywhere (what the beam estimates need).
-fn media_are_uniform(scene: &Scene) -> bool {
-    scene.media.iter().all(|m| m.is_uniform())
+/// Whether every medium of the scene has the same density everywhere (what photon beams need).
+fn densities_are_constant(scene: &Scene) -> bool {
+    scene.media.iter().all(|m| m.density().is_none())
 }
 
 impl SppmSettings {
@@ -155,31 +156,20 @@ impl SppmSettings {
         Ok(())
     }
 
-    /// Checks the volume estimate against the scene's media: the beam estimates need media
-    /// that are the same everywhere.
+    /// Checks the volume estimate against the scene's media: photon beams need media of
+    /// constant density.
     pub fn validate_for(&self, scene: &Scene) -> Result<(), SppmError> {
-        let name = match self.volume_estimate {
-            VolumeEstimate::Point => return Ok(()),
-            VolumeEstimate::Beam => "beam",
-            VolumeEstimate::PhotonBeams => "photon-beams",
-        };
-        if media_are_uniform(scene) {
-            Ok(())
-        } else {
-            Err(SppmError::VaryingMedium(name))
+        if self.volume_estimate == VolumeEstimate::PhotonBeams && !densities_are_constant(scene) {
+            return Err(SppmError::VaryingDensity);
         }
+        Ok(())
     }
 
     /// Settings from the scene's `<integrator>`: Mitsuba's `photon_count`, `initial_radius` (0 or
-    /// absent: [`default_radius`]) and `alpha`, our `k`, and `max_depth` and `rr_depth`. A scene
-    /// with a medium that varies in space gets the point estimate, the one that handles it.
+    /// absent: [`default_radius`]) and `alpha`, our `k`, and `max_depth` and `rr_depth`.
     pub fn from_scene(scene: &Scene) -> SppmSettings {
         let decl = &scene.integrator;
-        let estimate = if media_are_uniform(scene) {
-            VolumeEstimate::default()
-        } else {
-            VolumeEstimate::Point
-        };
+        let estimate = VolumeEstimate::default();
         let mut s = SppmSettings {
             photons: default_photons(scene),
             initial_radius: 0.0,
