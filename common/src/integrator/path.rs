@@ -60,10 +60,14 @@ pub fn radiance(
                     * direct::point_lights_along(scene, &w.ray, stretch.medium, stretch.surface, sampler);
             }
         });
+        let finds_light = !(leave_caustics && walk.after_specular());
+        if finds_light {
+            l += walk.take_crossed();
+        }
         match event {
             // A path that leaves the scene finds the environment, if there is one, and ends.
             Event::Gone => {
-                if !(leave_caustics && walk.after_specular()) {
+                if finds_light {
                     l += walk.escaped(scene);
                 }
                 break;
@@ -86,7 +90,7 @@ pub fn radiance(
             }
             Event::Surface(hit) => {
                 // Emission found by the camera ray or by BSDF sampling.
-                if !(leave_caustics && walk.after_specular()) {
+                if finds_light {
                     l += walk.emission(scene, &hit);
                 }
                 if walk.depth + 1 >= max_depth {

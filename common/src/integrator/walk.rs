@@ -35,6 +35,10 @@ pub struct Walk {
     pub prev: Option<PreviousBounce>,
     /// Medium boundaries crossed (bounded by [`Scene::cross_boundary`]).
     crossings: u32,
+    /// Light emitted by null surfaces crossed since it was last taken ([`Walk::take_crossed`]),
+    /// times the throughput there, weighted as [`Walk::emission`] weights it. Mitsuba counts an
+    /// emitter's light wherever a ray meets it, also where its material lets the ray through.
+    crossed: Rgb,
 }
 
 /// Where a walk interacts next.
@@ -133,6 +137,7 @@ impl Walk {
             depth: 0,
             prev: None,
             crossings: 0,
+            crossed: Rgb::ZERO,
         }
     }
 
@@ -218,6 +223,10 @@ impl Walk {
             let shape = &scene.shapes[sp.shape as usize];
             let bsdf = &scene.bsdfs[shape.bsdf as usize];
             if bsdf.is_null() {
+                if let Some(li) = shape.light {
+                    self.crossed +=
+                        self.beta * super::direct::emitted(scene, li, &sp, -self.ray.d, self.prev.as_ref());
+                }
                 self.beta *= bsdf.null_transmission(sp.tex());
                 match scene.cross_boundary(&sp, self.ray.d, self.medium, &mut self.crossings) {
                     Some((next, entered)) => (self.ray, self.medium) = (next, entered),
@@ -236,6 +245,12 @@ impl Walk {
             Some(li) => self.beta * super::direct::emitted(scene, li, &hit.sp, hit.wo, self.prev.as_ref()),
             None => Rgb::ZERO,
         }
+    }
+
+    /// The light of emitting null surfaces the walk crossed on its way to its last event, as
+    /// [`Walk::emission`] gives a surface's (light paths leave it).
+    pub fn take_crossed(&mut self) -> Rgb {
+        std::mem::take(&mut self.crossed)
     }
 
     /// Whether the last bounce sampled a delta lobe.

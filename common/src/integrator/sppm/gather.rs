@@ -76,6 +76,7 @@ pub fn camera_path(ctx: &GatherContext, ray: Ray, sampler: &mut Sampler) -> Rgb 
             }),
             VolumeMap::Point(_) => walk.next_event(scene, sampler),
         };
+        l += walk.take_crossed();
         match event {
             Event::Gone => {
                 l += walk.escaped(scene);
