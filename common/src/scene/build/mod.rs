@@ -173,7 +173,15 @@ impl<'a> Builder<'a> {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
         }
+        // A material nested in another may carry an id too, and shapes may refer to it (as in
+        // Mitsuba, whose parser names every object with an id wherever it is declared):
+        // Bitterli's staircase refers to the two-sided metal inside a bump map's `<bsdf>`.
+        let mut bsdfs = Vec::new();
         for el in root.children.iter().filter(|e| e.tag == "bsdf") {
+            bsdfs.push(el);
+            nested_with_id(el, "bsdf", &mut bsdfs);
+        }
+        for el in bsdfs {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
@@ -342,5 +350,15 @@ impl<'a> Builder<'a> {
             self.lights
                 .push(Light::Area(AreaLight::new(radiance, prims, bvh.primitives())));
         }
+    }
+}
+
+/// The `tag` elements with an id anywhere inside `el`, outermost first.
+fn nested_with_id<'e>(el: &'e Element, tag: &str, out: &mut Vec<&'e Element>) {
+    for c in &el.children {
+        if c.tag == tag && c.attr("id").is_some() {
+            out.push(c);
+        }
+        nested_with_id(c, tag, out);
     }
 }
