@@ -151,6 +151,11 @@ impl<'s> Renderer<'s> {
         self
     }
 
+    /// Whether its path tracer runs on the lane engine (the engine models the scene).
+    pub fn on_lanes(&self) -> bool {
+        self.lanes.is_some()
+    }
+
     /// The sum of passes `passes`.
     pub fn passes(&mut self, passes: Range<u64>) -> FilmSum {
         self.run(passes, None, &AtomicBool::new(false), None, None)
