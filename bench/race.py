@@ -67,24 +67,29 @@ def ensure_mitsuba(venv):
 
 
 MITSUBA_WORKER = r'''
-import json, os, re, sys, time
+import json, os, sys, time
+import xml.etree.ElementTree as ET
 import numpy as np
 import mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
 scene_path, ref_path, seconds, defines = sys.argv[1], sys.argv[2], float(sys.argv[3]), json.loads(sys.argv[4])
 sampler, chunk = sys.argv[5], int(sys.argv[6])
 start = time.time()
-text = open(scene_path).read()
+root = ET.parse(scene_path).getroot()
 if sampler != "scene":
-    # The scene's sampler (or the default, `independent`) replaced by the one asked for.
-    if re.search(r"<sampler\b", text):
-        text = re.sub(r'<sampler\s+type="[^"]*"', f'<sampler type="{sampler}"', text, count=1)
-    else:
-        text = re.sub(r"(<sensor\b[^>]*[^/]>)", rf'\1<sampler type="{sampler}"/>', text, count=1)
-mi.Thread.thread().file_resolver().prepend(os.path.dirname(os.path.abspath(scene_path)))
-scene = mi.load_string(text, **defines)
+    # The sensor's sampler (or the default, `independent`) replaced by the one asked for; its
+    # properties go too (another sampler may refuse them), `spp` below sets the count.
+    sensors = root.findall("sensor")
+    if len(sensors) != 1:
+        sys.exit(f"{scene_path}: {len(sensors)} top-level <sensor>s, cannot swap the sampler "
+                 "(--mitsuba-sampler scene keeps the scene's)")
+    for old in sensors[0].findall("sampler"):
+        sensors[0].remove(old)
+    ET.SubElement(sensors[0], "sampler", {"type": sampler})
+mi.file_resolver().prepend(os.path.dirname(os.path.abspath(scene_path)))
+scene = mi.load_string(ET.tostring(root, encoding="unicode"), **defines)
 acc, spp, seed = None, 0, 0
-while time.time() - start < seconds:
+while acc is None or time.time() - start < seconds:
     img = np.array(mi.render(scene, spp=chunk, seed=seed))[..., :3]
     acc = img * chunk if acc is None else acc + img * chunk
     spp += chunk
@@ -150,7 +155,7 @@ def cell(r):
         return "error: " + r["error"][:40]
     method = f", {r['method']}" if r.get("method") else ""
     if "rmse" not in r:
-        return f"{r['spp']} spp{method}"
+        return f"{r.get('spp') or '?'} spp{method}"
     return f"{r['rmse']:.4f} ({r['spp']}{method})"
 
 
