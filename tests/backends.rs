@@ -1,7 +1,7 @@
 //! Every reference scene gives the same bytes on every SIMD backend this machine has, on one
 //! thread and on two (issue 27): the farm's promise of the same image whatever the workers.
-//! Scenes the lane engine models (cbox, the meshes) run on it; the rest run on the scalar
-//! integrators whatever the backend, and join the comparison as the engine grows to model them.
+//! Scenes the lane engine models (cbox and nested-id today) run on it; the rest run on the
+//! scalar integrators whatever the backend, and join the comparison as the engine grows.
 
 use photonfarm::engine::Backend;
 use photonfarm::job::JobSettings;

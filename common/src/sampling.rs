@@ -241,6 +241,11 @@ struct Entry {
     pmf: f32,
 }
 
+/// The full search: the first of `entries` whose cumulative sum exceeds `u`, or the last.
+fn first_above(entries: &[Entry], u: f32) -> usize {
+    entries.partition_point(|e| e.cdf <= u).min(entries.len() - 1)
+}
+
 /// Entries per guide bucket, on average: a 64-byte cache line of the cumulative sums.
 const GUIDE_SPAN: usize = 16;
 
@@ -267,10 +272,7 @@ impl Distribution1D {
         }
         let buckets = entries.len().div_ceil(GUIDE_SPAN);
         let guide = (0..=buckets)
-            .map(|k| {
-                let t = k as f32 / buckets as f32;
-                entries.partition_point(|e| e.cdf <= t).min(entries.len() - 1) as u32
-            })
+            .map(|k| first_above(&entries, k as f32 / buckets as f32) as u32)
             .collect();
         Distribution1D {
             entries,
@@ -293,7 +295,7 @@ impl Distribution1D {
         if inside {
             lo + e[lo..hi].partition_point(|x| x.cdf <= u)
         } else {
-            e.partition_point(|x| x.cdf <= u).min(last)
+            first_above(e, u)
         }
     }
 
@@ -392,6 +394,8 @@ mod tests {
                         .filter(|u| (0.0..1.0).contains(u)),
                 );
             }
+            // Numbers no sampler draws, which must not panic or pick otherwise either.
+            us.extend([f32::NAN, -1.0, -0.0, 1.0, 2.0, f32::INFINITY]);
             for u in us {
                 let full = cdf.partition_point(|&c| c <= u).min(cdf.len() - 1);
                 assert_eq!(d.find(u), full, "{n} entries, u = {u:e}");

@@ -19,16 +19,26 @@ impl Builder<'_> {
             let id = el
                 .attr("id")
                 .ok_or_else(|| self.ctx.err(el, "a <ref> needs an id"))?;
-            let i = *self
-                .bsdf_ids
-                .get(id)
-                .ok_or_else(|| self.ctx.err(el, format!("no <bsdf> with id \"{id}\"")))?;
-            if let Some(read) = self.bsdf_attributes.get(&i) {
-                self.attributes_read.extend(read.iter().cloned());
-            }
-            return Ok(self.bsdfs[i as usize].clone());
+            return self.named_bsdf(el, id);
+        }
+        if let Some(id) = el.attr("id")
+            && self.nested_sites.get(id) == Some(&(el.file.clone(), el.line))
+        {
+            return self.named_bsdf(el, id);
         }
         self.bsdf(el)
+    }
+
+    /// The material built under `id`, with the mesh attributes it reads.
+    fn named_bsdf(&mut self, el: &Element, id: &str) -> Res<Bsdf> {
+        let i = *self
+            .bsdf_ids
+            .get(id)
+            .ok_or_else(|| self.ctx.err(el, format!("no <bsdf> with id \"{id}\"")))?;
+        if let Some(read) = self.bsdf_attributes.get(&i) {
+            self.attributes_read.extend(read.iter().cloned());
+        }
+        Ok(self.bsdfs[i as usize].clone())
     }
 
     pub(super) fn nested_bsdfs(&mut self, p: &Props) -> Res<Vec<Bsdf>> {

@@ -107,6 +107,9 @@ struct Builder<'a> {
     attributes_read: Vec<String>,
     /// Those each top-level BSDF reads, by index, for the shapes that refer to it.
     bsdf_attributes: HashMap<u32, Vec<String>>,
+    /// Materials named inside other materials, by id: where each was declared, so that its
+    /// parent takes the one built under the name.
+    nested_sites: HashMap<String, (Arc<std::path::PathBuf>, u32)>,
 }
 
 /// Whether `el` is a `<shape type="shapegroup">`.
@@ -138,6 +141,7 @@ impl<'a> Builder<'a> {
             groups: HashMap::new(),
             attributes_read: Vec::new(),
             bsdf_attributes: HashMap::new(),
+            nested_sites: HashMap::new(),
         }
     }
 
@@ -176,12 +180,14 @@ impl<'a> Builder<'a> {
         // A material nested in another may carry an id too, and shapes may refer to it (as in
         // Mitsuba, whose parser names every object with an id wherever it is declared):
         // Bitterli's staircase refers to the two-sided metal inside a bump map's `<bsdf>`.
+        // Innermost first, so that a parent reuses what was built under the name
+        // (`nested_sites`) instead of building it, and its textures, again.
         let mut bsdfs = Vec::new();
         for el in root.children.iter().filter(|e| e.tag == "bsdf") {
-            bsdfs.push(el);
             nested_with_id(el, "bsdf", &mut bsdfs);
+            bsdfs.push((el, false));
         }
-        for el in bsdfs {
+        for (el, nested) in bsdfs {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
@@ -195,6 +201,10 @@ impl<'a> Builder<'a> {
                     || self.texture_ids.contains_key(id))
             {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
+            }
+            if nested && let Some(id) = el.attr("id") {
+                self.nested_sites
+                    .insert(id.to_string(), (el.file.clone(), el.line));
             }
         }
         // Area emitters declared at the top level shine through the shape that refers to them.
@@ -353,12 +363,12 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// The `tag` elements with an id anywhere inside `el`, outermost first.
-fn nested_with_id<'e>(el: &'e Element, tag: &str, out: &mut Vec<&'e Element>) {
+/// The `tag` elements with an id anywhere inside `el`, innermost first, each marked nested.
+fn nested_with_id<'e>(el: &'e Element, tag: &str, out: &mut Vec<(&'e Element, bool)>) {
     for c in &el.children {
-        if c.tag == tag && c.attr("id").is_some() {
-            out.push(c);
-        }
         nested_with_id(c, tag, out);
+        if c.tag == tag && c.attr("id").is_some() {
+            out.push((c, true));
+        }
     }
 }
