@@ -177,17 +177,24 @@ impl<'a> Builder<'a> {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
             }
         }
-        // A material nested in another may carry an id too, and shapes may refer to it (as in
-        // Mitsuba, whose parser names every object with an id wherever it is declared):
-        // Bitterli's staircase refers to the two-sided metal inside a bump map's `<bsdf>`.
-        // Innermost first, so that a parent reuses what was built under the name
-        // (`nested_sites`) instead of building it, and its textures, again.
+        // A material nested in another or in a shape may carry an id too, and others may refer
+        // to it, wherever either is declared (as in Mitsuba, whose parser names every object
+        // with an id): Bitterli's staircase refers to the two-sided metal inside a bump map's
+        // `<bsdf>`. Innermost first, so that a parent reuses what was built under the name
+        // (`nested_sites`) instead of building it, and its textures, again; and each after
+        // the materials it refers to.
         let mut bsdfs = Vec::new();
-        for el in root.children.iter().filter(|e| e.tag == "bsdf") {
+        for el in root
+            .children
+            .iter()
+            .filter(|e| e.tag == "bsdf" || e.tag == "shape")
+        {
             nested_with_id(el, "bsdf", &mut bsdfs);
-            bsdfs.push((el, false));
+            if el.tag == "bsdf" {
+                bsdfs.push((el, false));
+            }
         }
-        for (el, nested) in bsdfs {
+        for (el, nested) in in_dependency_order(bsdfs) {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
@@ -360,6 +367,49 @@ impl<'a> Builder<'a> {
             self.lights
                 .push(Light::Area(AreaLight::new(radiance, prims, bvh.primitives())));
         }
+    }
+}
+
+/// Materials reordered so that each comes after the named ones it refers to or nests, in
+/// document order otherwise. Where a name is missing or names form a cycle, the first left
+/// comes next, and building it reports the name it lacks.
+fn in_dependency_order<'e>(items: Vec<(&'e Element, bool)>) -> Vec<(&'e Element, bool)> {
+    let declared: std::collections::HashSet<&str> = items.iter().filter_map(|(e, _)| e.attr("id")).collect();
+    let needs = |el: &'e Element| {
+        let mut out = Vec::new();
+        names_inside(el, &declared, &mut out);
+        out
+    };
+    let deps: Vec<Vec<&str>> = items.iter().map(|(e, _)| needs(e)).collect();
+    let mut built = std::collections::HashSet::new();
+    let mut placed = vec![false; items.len()];
+    let mut out = Vec::with_capacity(items.len());
+    // Everything before `first` is placed: in a file without forward references each step
+    // takes `first`, so the order costs one pass.
+    let mut first = 0;
+    while out.len() < items.len() {
+        while placed[first] {
+            first += 1;
+        }
+        let ready = (first..items.len()).find(|&i| !placed[i] && deps[i].iter().all(|d| built.contains(d)));
+        let next = ready.unwrap_or(first);
+        placed[next] = true;
+        built.extend(items[next].0.attr("id"));
+        out.push(items[next]);
+    }
+    out
+}
+
+/// The names among `declared` that `el`'s descendants refer to (`<ref id>`) or carry.
+fn names_inside<'e>(el: &'e Element, declared: &std::collections::HashSet<&str>, out: &mut Vec<&'e str>) {
+    for c in &el.children {
+        if let Some(id) = c.attr("id")
+            && (c.tag == "ref" || c.tag == "bsdf")
+            && declared.contains(id)
+        {
+            out.push(id);
+        }
+        names_inside(c, declared, out);
     }
 }
 
