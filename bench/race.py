@@ -198,8 +198,7 @@ def main():
         extra = [ours(args.coordinator, scene, ref, defines, m, args.seconds, py) for m in our_extra]
         runs = [mitsuba(py, scene, ref, defines, args.seconds, m, args.mitsuba_sampler, args.mitsuba_chunk)
                 for m in methods]
-        score = lambda r: r.get("rmse", float("inf"))
-        mi_r = min(runs, key=score)
+        mi_r = min(runs, key=lambda r: r.get("rmse", float("inf")))
         mi_path = next((r for r, m in zip(runs, methods) if m in (None, "path")), mi_r)
         best = min((r["rmse"] for r in [path, sppm] + extra if "rmse" in r), default=float("nan"))
         ratio = best / mi_r["rmse"] if "rmse" in mi_r else float("nan")

@@ -40,11 +40,13 @@ fn every_reference_scene_gives_the_same_bytes_on_every_backend() {
         }
         .resolve(&scene, false)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let render = |b: Backend| Renderer::on(&scene, &settings.render, Some(b)).passes(0..2);
-        let first = pools[0].install(|| render(backends[0]));
+        let render = |b: Backend| Renderer::on(&scene, &settings.render, Some(b));
+        let mut renderer = render(backends[0]);
+        on_lanes += usize::from(renderer.on_lanes());
+        let first = pools[0].install(|| renderer.passes(0..2));
         for (pool, threads) in pools.iter().zip([1, 2]) {
             for &b in &backends {
-                let film = pool.install(|| render(b));
+                let film = pool.install(|| render(b).passes(0..2));
                 assert!(
                     film == first,
                     "{}: {b} on {threads} threads differs from {} on 1",
@@ -53,7 +55,6 @@ fn every_reference_scene_gives_the_same_bytes_on_every_backend() {
                 );
             }
         }
-        on_lanes += usize::from(Renderer::on(&scene, &settings.render, Some(backends[0])).on_lanes());
     }
     eprintln!(
         "{} scenes, {on_lanes} on the lane engine, backends {backends:?}",

@@ -21,8 +21,10 @@ impl Builder<'_> {
                 .ok_or_else(|| self.ctx.err(el, "a <ref> needs an id"))?;
             return self.named_bsdf(el, id);
         }
+        // Every named material inside a material or a shape was built when its name was
+        // registered (`Builder::scene`), before whatever nests it.
         if let Some(id) = el.attr("id")
-            && self.nested_sites.get(id) == Some(&(el.file.clone(), el.line))
+            && self.bsdf_ids.contains_key(id)
         {
             return self.named_bsdf(el, id);
         }

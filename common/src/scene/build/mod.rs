@@ -107,9 +107,6 @@ struct Builder<'a> {
     attributes_read: Vec<String>,
     /// Those each top-level BSDF reads, by index, for the shapes that refer to it.
     bsdf_attributes: HashMap<u32, Vec<String>>,
-    /// Materials named inside other materials, by id: where each was declared, so that its
-    /// parent takes the one built under the name.
-    nested_sites: HashMap<String, (Arc<std::path::PathBuf>, u32)>,
 }
 
 /// Whether `el` is a `<shape type="shapegroup">`.
@@ -141,7 +138,6 @@ impl<'a> Builder<'a> {
             groups: HashMap::new(),
             attributes_read: Vec::new(),
             bsdf_attributes: HashMap::new(),
-            nested_sites: HashMap::new(),
         }
     }
 
@@ -181,20 +177,20 @@ impl<'a> Builder<'a> {
         // to it, wherever either is declared (as in Mitsuba, whose parser names every object
         // with an id): Bitterli's staircase refers to the two-sided metal inside a bump map's
         // `<bsdf>`. Innermost first, so that a parent reuses what was built under the name
-        // (`nested_sites`) instead of building it, and its textures, again; and each after
-        // the materials it refers to.
+        // instead of building it, and its textures, again; and each after the materials it
+        // refers to.
         let mut bsdfs = Vec::new();
         for el in root
             .children
             .iter()
             .filter(|e| e.tag == "bsdf" || e.tag == "shape")
         {
-            nested_with_id(el, "bsdf", &mut bsdfs);
+            nested_with_id(el, &mut bsdfs);
             if el.tag == "bsdf" {
-                bsdfs.push((el, false));
+                bsdfs.push(el);
             }
         }
-        for (el, nested) in in_dependency_order(bsdfs) {
+        for el in in_dependency_order(bsdfs) {
             let bsdf = self.bsdf(el)?;
             let index = self.bsdfs.len() as u32;
             self.bsdfs.push(bsdf);
@@ -208,10 +204,6 @@ impl<'a> Builder<'a> {
                     || self.texture_ids.contains_key(id))
             {
                 return Err(ctx.err(el, format!("id \"{id}\" is used twice")));
-            }
-            if nested && let Some(id) = el.attr("id") {
-                self.nested_sites
-                    .insert(id.to_string(), (el.file.clone(), el.line));
             }
         }
         // Area emitters declared at the top level shine through the shape that refers to them.
@@ -373,14 +365,14 @@ impl<'a> Builder<'a> {
 /// Materials reordered so that each comes after the named ones it refers to or nests, in
 /// document order otherwise. Where a name is missing or names form a cycle, the first left
 /// comes next, and building it reports the name it lacks.
-fn in_dependency_order<'e>(items: Vec<(&'e Element, bool)>) -> Vec<(&'e Element, bool)> {
-    let declared: std::collections::HashSet<&str> = items.iter().filter_map(|(e, _)| e.attr("id")).collect();
+fn in_dependency_order<'e>(items: Vec<&'e Element>) -> Vec<&'e Element> {
+    let declared: std::collections::HashSet<&str> = items.iter().filter_map(|e| e.attr("id")).collect();
     let needs = |el: &'e Element| {
         let mut out = Vec::new();
         names_inside(el, &declared, &mut out);
         out
     };
-    let deps: Vec<Vec<&str>> = items.iter().map(|(e, _)| needs(e)).collect();
+    let deps: Vec<Vec<&str>> = items.iter().map(|e| needs(e)).collect();
     let mut built = std::collections::HashSet::new();
     let mut placed = vec![false; items.len()];
     let mut out = Vec::with_capacity(items.len());
@@ -394,7 +386,7 @@ fn in_dependency_order<'e>(items: Vec<(&'e Element, bool)>) -> Vec<(&'e Element,
         let ready = (first..items.len()).find(|&i| !placed[i] && deps[i].iter().all(|d| built.contains(d)));
         let next = ready.unwrap_or(first);
         placed[next] = true;
-        built.extend(items[next].0.attr("id"));
+        built.extend(items[next].attr("id"));
         out.push(items[next]);
     }
     out
@@ -413,12 +405,12 @@ fn names_inside<'e>(el: &'e Element, declared: &std::collections::HashSet<&str>,
     }
 }
 
-/// The `tag` elements with an id anywhere inside `el`, innermost first, each marked nested.
-fn nested_with_id<'e>(el: &'e Element, tag: &str, out: &mut Vec<(&'e Element, bool)>) {
+/// The `<bsdf>`s with an id anywhere inside `el`, innermost first.
+fn nested_with_id<'e>(el: &'e Element, out: &mut Vec<&'e Element>) {
     for c in &el.children {
-        nested_with_id(c, tag, out);
-        if c.tag == tag && c.attr("id").is_some() {
-            out.push((c, true));
+        nested_with_id(c, out);
+        if c.tag == "bsdf" && c.attr("id").is_some() {
+            out.push(c);
         }
     }
 }
