@@ -2,8 +2,9 @@
 //!
 //! Prints, per scene, single-thread figures (so "per core"): closest-hit camera rays per second,
 //! a path-tracing mix of rays (camera, diffuse bounce, shadow) per second, and path-traced
-//! samples per second; medians of 5 runs taken in one process. Scenes: the Cornell box and a
-//! generated bumpy sphere of 131,072 triangles loaded from a binary PLY file.
+//! samples per second; medians of 5 runs taken in one process. Scenes: the Cornell box, a
+//! generated bumpy sphere of 131,072 triangles loaded from a binary PLY file, and any given as
+//! `-- --scene PATH[,NAME=VALUE...]` (repeatable; the values are the scene's defaults).
 //!
 //! With `--features obvhs` it also records one set of camera, bounce and shadow rays per scene
 //! and traces exactly those with our BVH, obvhs's CWBVH and obvhs's BVH2 (BVH only, no surface
@@ -225,4 +226,27 @@ fn main() {
     bench(&format!("bumpy sphere ({}k triangles)", tris / 1000), &mesh);
     #[cfg(feature = "obvhs")]
     ab("bumpy sphere", &mesh);
+
+    // Scenes of one's own, for instance the interiors of the fair race (not checked in):
+    // `--scene PATH[,NAME=VALUE...]`, repeatable.
+    let args: Vec<String> = std::env::args().collect();
+    for w in args.windows(2).filter(|w| w[0] == "--scene") {
+        let mut parts = w[1].split(',');
+        let path = parts.next().unwrap_or_default();
+        let defines: Vec<(String, String)> = parts
+            .filter_map(|kv| kv.split_once('='))
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        let scene = match Scene::load(Path::new(path), &defines) {
+            Ok(scene) => scene,
+            Err(e) => {
+                eprintln!("{path}: {e}");
+                std::process::exit(1);
+            }
+        };
+        let name = format!("{path} ({} primitives)", scene.bvh.primitives().len());
+        bench(&name, &scene);
+        #[cfg(feature = "obvhs")]
+        ab(&name, &scene);
+    }
 }
