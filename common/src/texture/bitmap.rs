@@ -5,6 +5,7 @@ use std::path::Path;
 
 use glam::{Affine2, Vec2};
 
+use super::texels::Texels;
 use crate::color::{Rgb, luminance};
 
 /// How texels are interpolated.
@@ -38,27 +39,20 @@ pub enum BitmapError {
     Empty,
 }
 
-/// Texels from integer RGB samples, through `table`.
-fn by_table<T: Copy + Into<usize>>(samples: &[T], table: &[f32]) -> Vec<Rgb> {
-    samples
-        .chunks_exact(3)
-        .map(|c| Rgb::new(table[c[0].into()], table[c[1].into()], table[c[2].into()]))
-        .collect()
-}
-
 /// The linear value of each level of an 8- or 16-bit sample: level / (levels − 1), sRGB-decoded
 /// unless the texture is `raw`. Why a table: `powf` for each channel of each texel was 67% of
 /// loading Bitterli's staircase (ten JPEGs, 3.6 s). Why from the integer samples: the image
 /// crate's own conversion to floats is not always level / 255 to the bit (and runs its SIMD
 /// code, picked by CPU), so the texels now depend on our arithmetic alone.
-fn level_values(levels: usize, srgb: bool) -> Vec<f32> {
-    let top = (levels - 1) as f32;
-    (0..levels)
+fn level_values<const LEVELS: usize>(srgb: bool) -> Box<[f32; LEVELS]> {
+    let top = (LEVELS - 1) as f32;
+    let values: Vec<f32> = (0..LEVELS)
         .map(|i| {
             let v = i as f32 / top;
             if srgb { crate::color::srgb_decode(v) } else { v }
         })
-        .collect()
+        .collect();
+    values.into_boxed_slice().try_into().expect("one value a level")
 }
 
 /// An image, in linear RGB, ready for lookups.
@@ -67,7 +61,7 @@ pub struct Bitmap {
     width: u32,
     height: u32,
     /// Row by row from the top of the image.
-    texels: Vec<Rgb>,
+    texels: Texels,
     filter: Filter,
     wrap: Wrap,
     to_uv: Affine2,
@@ -95,16 +89,24 @@ impl Bitmap {
             return Err(BitmapError::Empty);
         }
         // 8- and 16-bit images are sRGB-encoded; floating-point ones (EXR, HDR) linear.
-        let texels: Vec<Rgb> = match image.color() {
-            L8 | La8 | Rgb8 | Rgba8 => by_table(&image.to_rgb8(), &level_values(1 << 8, !raw)),
-            L16 | La16 | Rgb16 | Rgba16 => by_table(&image.to_rgb16(), &level_values(1 << 16, !raw)),
-            _ => image
-                .to_rgb32f()
-                .pixels()
-                .map(|p| Rgb::new(p[0], p[1], p[2]))
-                .collect(),
+        let texels = match image.color() {
+            L8 | La8 | Rgb8 | Rgba8 => Texels::Levels8 {
+                samples: image.to_rgb8().into_raw(),
+                table: level_values::<{ 1 << 8 }>(!raw),
+            },
+            L16 | La16 | Rgb16 | Rgba16 => Texels::Levels16 {
+                samples: image.to_rgb16().into_raw(),
+                table: level_values::<{ 1 << 16 }>(!raw),
+            },
+            _ => Texels::Linear(
+                image
+                    .to_rgb32f()
+                    .pixels()
+                    .map(|p| Rgb::new(p[0], p[1], p[2]))
+                    .collect(),
+            ),
         };
-        Ok(Bitmap::from_texels(width, height, texels, filter, wrap, to_uv))
+        Ok(Bitmap::with_texels(width, height, texels, filter, wrap, to_uv))
     }
 
     /// A bitmap from linear texels, row by row from the top.
@@ -112,6 +114,17 @@ impl Bitmap {
         width: u32,
         height: u32,
         texels: Vec<Rgb>,
+        filter: Filter,
+        wrap: Wrap,
+        to_uv: Affine2,
+    ) -> Bitmap {
+        Bitmap::with_texels(width, height, Texels::Linear(texels), filter, wrap, to_uv)
+    }
+
+    fn with_texels(
+        width: u32,
+        height: u32,
+        texels: Texels,
         filter: Filter,
         wrap: Wrap,
         to_uv: Affine2,
@@ -142,8 +155,8 @@ impl Bitmap {
     }
 
     /// The linear texels, row by row from the top.
-    pub fn texels(&self) -> &[Rgb] {
-        &self.texels
+    pub fn texels(&self) -> Vec<Rgb> {
+        self.texels.iter().collect()
     }
 
     /// Width and height in texels.
@@ -154,7 +167,7 @@ impl Bitmap {
     fn texel(&self, x: i64, y: i64) -> Rgb {
         let x = wrap_index(x, self.width as i64, self.wrap);
         let y = wrap_index(y, self.height as i64, self.wrap);
-        self.texels[(y * self.width as i64 + x) as usize]
+        self.texels.get((y * self.width as i64 + x) as usize)
     }
 
     /// The colour at `uv`.
@@ -222,13 +235,56 @@ mod tests {
     /// Each level's value is the level's fraction of the top one, sRGB-decoded unless raw.
     #[test]
     fn levels_decode_as_srgb_decode() {
-        for levels in [1 << 8, 1 << 16] {
-            let (srgb, raw) = (level_values(levels, true), level_values(levels, false));
+        fn check(srgb: &[f32], raw: &[f32]) {
+            let levels = srgb.len();
             for i in 0..levels {
                 let v = i as f32 / (levels - 1) as f32;
                 assert_eq!(srgb[i].to_bits(), crate::color::srgb_decode(v).to_bits());
                 assert_eq!(raw[i].to_bits(), v.to_bits());
             }
+        }
+        check(
+            &*level_values::<{ 1 << 8 }>(true),
+            &*level_values::<{ 1 << 8 }>(false),
+        );
+        check(
+            &*level_values::<{ 1 << 16 }>(true),
+            &*level_values::<{ 1 << 16 }>(false),
+        );
+    }
+
+    /// 8- and 16-bit images keep their integer samples; each lookup decodes a texel to the
+    /// value the table gives its levels, for grey and colour images, sRGB or raw.
+    #[test]
+    fn integer_images_give_their_levels_decoded() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (5u32, 3u32);
+        let level = |x: u32, y: u32, c: u32| (x * 37 + y * 11 + c * 101) % 256;
+        let rgb8 = image::RgbImage::from_fn(w, h, |x, y| image::Rgb([0, 1, 2].map(|c| level(x, y, c) as u8)));
+        let grey16 = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(w, h, |x, y| {
+            image::Luma([(level(x, y, 0) * 257 + x) as u16])
+        });
+        let p8 = dir.path().join("rgb8.png");
+        let p16 = dir.path().join("grey16.png");
+        rgb8.save(&p8).unwrap();
+        grey16.save(&p16).unwrap();
+        for raw in [false, true] {
+            let decode = |v: f32| if raw { v } else { crate::color::srgb_decode(v) };
+            let load = |p| Bitmap::load(p, raw, Filter::Nearest, Wrap::Clamp, Affine2::IDENTITY).unwrap();
+            let (b8, b16) = (load(&p8), load(&p16));
+            for y in 0..h {
+                for x in 0..w {
+                    let uv = Vec2::new((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
+                    let want8 = Rgb::from_array([0, 1, 2].map(|c| decode(level(x, y, c) as f32 / 255.0)));
+                    assert_eq!(
+                        b8.eval(uv).to_array().map(f32::to_bits),
+                        want8.to_array().map(f32::to_bits)
+                    );
+                    let g = decode(grey16.get_pixel(x, y)[0] as f32 / 65535.0);
+                    assert_eq!(b16.eval(uv).to_array().map(f32::to_bits), [g.to_bits(); 3]);
+                }
+            }
+            assert_eq!(b8.texels().len(), (w * h) as usize);
         }
     }
 

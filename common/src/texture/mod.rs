@@ -6,6 +6,7 @@
 //! so that every BSDF sees the same parameters whichever integrator calls it.
 
 mod bitmap;
+mod texels;
 
 use std::sync::Arc;
 

@@ -146,7 +146,7 @@ impl Builder<'_> {
                 Light::Envmap(Box::new(EnvmapLight::new(
                     w as usize,
                     h as usize,
-                    bitmap.texels().to_vec(),
+                    bitmap.texels(),
                     scale,
                     Mat3A::from_mat4(m),
                 )))
