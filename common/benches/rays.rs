@@ -106,7 +106,7 @@ fn ab(name: &str, scene: &Scene) {
     use std::hint::black_box;
     const AB_RUNS: usize = 15;
     let rays = record(scene);
-    let prims = scene.bvh.primitives().to_vec();
+    let prims: Vec<_> = scene.bvh.distinct().map(|(_, p)| p.clone()).collect();
     let backends = [Backend::Own, Backend::Cwbvh, Backend::Bvh2];
     let mut builds = vec![Vec::new(); backends.len()];
     let mut bvhs = Vec::new();
@@ -237,6 +237,7 @@ fn main() {
             .filter_map(|kv| kv.split_once('='))
             .map(|(k, v)| (k.to_string(), v.to_string()))
             .collect();
+        let t = Instant::now();
         let scene = match Scene::load(Path::new(path), &defines) {
             Ok(scene) => scene,
             Err(e) => {
@@ -244,7 +245,12 @@ fn main() {
                 std::process::exit(1);
             }
         };
-        let name = format!("{path} ({} primitives)", scene.bvh.primitives().len());
+        let name = format!(
+            "{path} ({} primitives, {} in leaves, loaded in {:.2} s)",
+            scene.bvh.distinct_len(),
+            scene.bvh.primitives().len(),
+            t.elapsed().as_secs_f64()
+        );
         bench(&name, &scene);
         #[cfg(feature = "obvhs")]
         ab(&name, &scene);

@@ -43,6 +43,14 @@ impl Aabb {
         }
     }
 
+    /// The box both hold (empty if they do not meet).
+    pub fn intersection(self, o: Aabb) -> Aabb {
+        Aabb {
+            min: self.min.max(o.min),
+            max: self.max.min(o.max),
+        }
+    }
+
     /// Whether the box holds nothing.
     pub fn is_empty(&self) -> bool {
         self.min.cmpgt(self.max).any()

@@ -1,18 +1,27 @@
-//! A bounding volume hierarchy built with the binned surface area heuristic.
+//! A bounding volume hierarchy built with the binned surface area heuristic, object splits and
+//! spatial splits (`spatial_split.rs`).
 
 use glam::Vec3A;
 
 use super::bvh4::{self, BinaryTree, WideNode};
 use super::packet::{self, Hits8, Rays8};
+use super::spatial_split;
 use super::{Aabb, Hit, PrimHit, Primitive, Ray};
 use crate::engine::lanes::{LANES, M8};
 
-const BINS: usize = 16;
+pub(super) const BINS: usize = 16;
 const MAX_LEAF: usize = 4;
 /// Cost of a traversal step relative to one primitive test, for the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
-/// Depth below which the SAH chooses splits. Deeper, splits are by count (median), which
-/// halves the primitives at every level: with at most 2^32 primitives the tree's depth stays
+/// References in a node from which its two halves are built in parallel (below, a task's
+/// overhead and the renumbering of its nodes cost more than the parallelism gains).
+const PARALLEL_BUILD: usize = 1 << 14;
+/// Spatial splits may add one reference for every this many primitives (Embree's default
+/// replication bound is of this order; without one, a scene of long slivers could multiply
+/// its references many times over).
+const SPATIAL_BUDGET_DIVISOR: usize = 2;
+/// Depth below which the SAH chooses splits (object and spatial). Deeper, splits are by count
+/// (median), which halves the references at every level: with at most 2^32 the tree's depth stays
 /// below `SAH_DEPTH + 32 = STACK`, so the traversal stack cannot overflow, whatever the
 /// geometry (the SAH alone peels one primitive per level off nested sizes in a progression).
 const SAH_DEPTH: usize = 32;
@@ -69,17 +78,84 @@ impl std::fmt::Debug for Accel {
 }
 
 /// The scene's acceleration structure; owns the primitives in traversal order.
+///
+/// With spatial splits (`spatial_split.rs`) a primitive can sit in several leaves: each leaf
+/// holds its own copy, so that a leaf's primitives stay contiguous (reaching them through an
+/// index array instead cost the living room 5–10% of its rays a second), and `distinct` names
+/// the first copy of each.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
     accel: Accel,
     prims: Vec<Primitive>,
+    /// Slot of each primitive's first copy, ascending.
+    distinct: Vec<u32>,
     bounds: Aabb,
 }
 
-struct BuildItem {
-    bounds: Aabb,
+/// A reference to a primitive during the build: the box of its part in the node.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct BuildItem {
+    pub(super) bounds: Aabb,
     centroid: Vec3A,
-    index: usize,
+    pub(super) index: usize,
+}
+
+impl BuildItem {
+    fn new(index: usize, bounds: Aabb) -> BuildItem {
+        BuildItem {
+            bounds,
+            centroid: bounds.center(),
+            index,
+        }
+    }
+
+    /// The same primitive with a smaller part's box (a spatial split's side).
+    pub(super) fn with_bounds(&self, bounds: Aabb) -> BuildItem {
+        BuildItem::new(self.index, bounds)
+    }
+}
+
+/// What the build accumulates while it recurses.
+struct Builder<'a> {
+    prims: &'a [Primitive],
+    nodes: Vec<Node>,
+    /// Leaf slots in order: the primitive each holds.
+    order: Vec<u32>,
+    /// References spatial splits may still add (bounds the build's memory).
+    budget: usize,
+    /// Surface area of the root, against which a split's overlap is judged.
+    root_area: f32,
+}
+
+impl<'a> Builder<'a> {
+    fn new(prims: &'a [Primitive], root_area: f32, budget: usize, capacity: usize) -> Builder<'a> {
+        Builder {
+            prims,
+            nodes: Vec::with_capacity(2 * capacity),
+            order: Vec::with_capacity(capacity),
+            budget,
+            root_area,
+        }
+    }
+
+    /// Builds `items` as a subtree of its own (nodes and slots numbered from 0).
+    fn subtree(&self, items: Vec<BuildItem>, budget: usize, depth: usize) -> Builder<'a> {
+        let mut b = Builder::new(self.prims, self.root_area, budget, 0);
+        build_node(&mut b, items, depth);
+        b
+    }
+
+    /// Appends a subtree built on its own, renumbering its nodes and slots; returns the index
+    /// of its root.
+    fn append(&mut self, sub: Builder) -> usize {
+        let (node_base, slot_base) = (self.nodes.len() as u32, self.order.len() as u32);
+        self.nodes.extend(sub.nodes.into_iter().map(|mut n| {
+            n.offset += if n.count > 0 { slot_base } else { node_base };
+            n
+        }));
+        self.order.extend(sub.order);
+        node_base as usize
+    }
 }
 
 impl Bvh {
@@ -118,35 +194,75 @@ impl Bvh {
     }
 
     fn build_own(prims: Vec<Primitive>, bounds: Aabb) -> Bvh {
-        let mut items: Vec<BuildItem> = prims
+        let items: Vec<BuildItem> = prims
             .iter()
             .enumerate()
-            .map(|(index, p)| {
-                let bounds = p.bounds();
-                BuildItem {
-                    bounds,
-                    centroid: bounds.center(),
-                    index,
-                }
-            })
+            .map(|(index, p)| BuildItem::new(index, p.bounds()))
             .collect();
-        let mut nodes = Vec::with_capacity(2 * prims.len().max(1));
+        let mut b = Builder::new(
+            &prims,
+            bounds.surface_area(),
+            prims.len() / SPATIAL_BUDGET_DIVISOR,
+            prims.len(),
+        );
         if !items.is_empty() {
-            build_node(&mut items, 0, 0, &mut nodes);
+            build_node(&mut b, items, 0);
         }
+        let (nodes, order) = (b.nodes, b.order);
+        assert!(
+            order.len() <= u32::MAX as usize,
+            "leaf slots are numbered in 32 bits"
+        );
+        let mut seen = vec![false; prims.len()];
+        let distinct = (0..order.len() as u32)
+            .filter(|&slot| !std::mem::replace(&mut seen[order[slot as usize] as usize], true))
+            .collect::<Vec<u32>>();
+        assert_eq!(distinct.len(), prims.len(), "every primitive is in a leaf");
+        // Each primitive moves to its first slot and is copied to the others.
         let mut slots: Vec<Option<Primitive>> = prims.into_iter().map(Some).collect();
-        let prims = items
-            .iter()
-            .map(|it| slots[it.index].take().expect("each primitive is placed once"))
+        let mut placed: Vec<Option<Primitive>> = vec![None; order.len()];
+        for &slot in &distinct {
+            placed[slot as usize] = slots[order[slot as usize] as usize].take();
+        }
+        let first: Vec<u32> = {
+            let mut first = vec![0; slots.len()];
+            for &slot in &distinct {
+                first[order[slot as usize] as usize] = slot;
+            }
+            first
+        };
+        for slot in 0..order.len() {
+            if placed[slot].is_none() {
+                placed[slot] = placed[first[order[slot] as usize] as usize].clone();
+            }
+        }
+        let prims = placed
+            .into_iter()
+            .map(|p| p.expect("every slot holds a primitive"))
             .collect();
         Bvh {
             accel: Accel::Own(bvh4::collapse(&Binary(&nodes))),
             prims,
+            distinct,
             bounds,
         }
     }
 
-    /// Primitives in BVH order; [`Hit::prim`] indexes this.
+    /// Each primitive once, with the slot of its first copy ([`Bvh::primitives`] holds a
+    /// primitive once per leaf it sits in): what an area light samples.
+    pub fn distinct(&self) -> impl Iterator<Item = (u32, &Primitive)> {
+        self.distinct
+            .iter()
+            .map(|&slot| (slot, &self.prims[slot as usize]))
+    }
+
+    /// How many distinct primitives the tree holds.
+    pub fn distinct_len(&self) -> usize {
+        self.distinct.len()
+    }
+
+    /// Primitives by leaf slot, in BVH order (a primitive in several leaves is here once per
+    /// leaf); [`Hit::prim`] indexes this.
     pub fn primitives(&self) -> &[Primitive] {
         &self.prims
     }
@@ -348,7 +464,12 @@ mod obvhs_backend {
             slots.iter().all(Option::is_none),
             "every primitive is in the tree"
         );
-        Ok(Bvh { accel, prims, bounds })
+        Ok(Bvh {
+            accel,
+            distinct: (0..prims.len() as u32).collect(),
+            prims,
+            bounds,
+        })
     }
 
     /// Levels below `node` (a node with only leaf children has depth 1).
@@ -422,61 +543,98 @@ mod obvhs_backend {
     }
 }
 
-fn make_leaf(items: &[BuildItem], first: usize, bounds: Aabb) -> Node {
-    debug_assert!(!items.is_empty() && items.len() <= u16::MAX as usize);
-    Node {
-        bounds,
-        offset: first as u32,
-        count: items.len() as u16,
-    }
-}
-
-/// Builds the subtree over `items` (which start at `first` in the final order) at `depth`;
-/// returns its index.
-fn build_node(items: &mut [BuildItem], first: usize, depth: usize, nodes: &mut Vec<Node>) -> usize {
+/// Builds the subtree over `items` at `depth`; returns its index. Leaves append their
+/// references to `b.order`.
+fn build_node(b: &mut Builder, mut items: Vec<BuildItem>, depth: usize) -> usize {
     let bounds = items.iter().fold(Aabb::EMPTY, |b, it| b.union(it.bounds));
-    let index = nodes.len();
+    let index = b.nodes.len();
+    let leaf = |b: &mut Builder, items: &[BuildItem]| {
+        debug_assert!(!items.is_empty() && items.len() <= u16::MAX as usize);
+        b.nodes.push(Node {
+            bounds,
+            offset: b.order.len() as u32,
+            count: items.len() as u16,
+        });
+        b.order.extend(items.iter().map(|it| it.index as u32));
+        index
+    };
     if items.len() <= 1 {
-        nodes.push(make_leaf(items, first, bounds));
-        return index;
+        return leaf(b, &items);
     }
     let centroids = items.iter().fold(Aabb::EMPTY, |b, it| b.grow(it.centroid));
-    let sah = if depth < SAH_DEPTH {
-        sah_split(items, &centroids, bounds)
-    } else {
-        None
-    };
-    let mid = match sah {
-        Some(split) => split,
-        None if items.len() <= MAX_LEAF => {
-            nodes.push(make_leaf(items, first, bounds));
-            return index;
+    let n = items.len();
+    let sah = depth < SAH_DEPTH;
+    let object = sah.then(|| object_split(&items, &centroids)).flatten();
+    // Spatial splits only where the object split's children overlap much (or none exists), and
+    // while the budget of copies lasts.
+    let overlapping = object.is_none_or(|o| {
+        o.left.intersection(o.right).surface_area() > spatial_split::MIN_OVERLAP * b.root_area
+    });
+    let spatial = (sah && overlapping && b.budget > 0)
+        .then(|| spatial_split::find(&items, b.prims, bounds))
+        .flatten()
+        .filter(|s| s.duplicates(n) <= b.budget && object.is_none_or(|o| s.cost < o.cost));
+    let best_cost = spatial.map(|s| s.cost).or(object.map(|o| o.cost));
+    let split_cost = best_cost.map(|c| TRAVERSAL_COST + c / bounds.surface_area().max(f32::MIN_POSITIVE));
+    if n <= MAX_LEAF && split_cost.is_none_or(|c| c >= n as f32) {
+        return leaf(b, &items);
+    }
+    let (left, right) = match spatial.and_then(|s| s.partition(&items, b.prims)) {
+        Some(halves) => {
+            // The node's own references are not needed below it (kept, every level of spatial
+            // splits held its copy to the end of the build).
+            drop(items);
+            halves
         }
         None => {
-            // No useful SAH split (e.g. coincident centroids): split by count on the widest axis.
-            let extent = centroids.extent();
-            let axis = if extent.x >= extent.y && extent.x >= extent.z {
-                0
-            } else if extent.y >= extent.z {
-                1
-            } else {
-                2
+            let mid = match object.and_then(|o| o.partition(&mut items, &centroids)) {
+                Some(mid) => mid,
+                None if n <= MAX_LEAF => return leaf(b, &items),
+                None => median(&mut items, &centroids),
             };
-            let m = items.len() / 2;
-            items.select_nth_unstable_by(m, |a, b| a.centroid[axis].total_cmp(&b.centroid[axis]));
-            m
+            let right = items.split_off(mid);
+            (items, right)
         }
     };
-    nodes.push(Node {
+    b.budget = b.budget.saturating_sub(left.len() + right.len() - n);
+    b.nodes.push(Node {
         bounds,
         offset: 0,
         count: 0,
     });
-    let (left, right) = items.split_at_mut(mid);
-    build_node(left, first, depth + 1, nodes);
-    let second = build_node(right, first + mid, depth + 1, nodes);
-    nodes[index].offset = second as u32;
+    let second = if n >= PARALLEL_BUILD {
+        // The halves in parallel, each with its share of the budget by size: the tree depends
+        // on the items alone, not on how many threads build it or which finishes first.
+        let left_budget = (b.budget as u64 * left.len() as u64 / (left.len() + right.len()) as u64) as usize;
+        let right_budget = b.budget - left_budget;
+        let (l, r) = rayon::join(
+            || b.subtree(left, left_budget, depth + 1),
+            || b.subtree(right, right_budget, depth + 1),
+        );
+        b.append(l);
+        b.append(r)
+    } else {
+        build_node(b, left, depth + 1);
+        build_node(b, right, depth + 1)
+    };
+    b.nodes[index].offset = second as u32;
     index
+}
+
+/// No useful SAH split (coincident centroids, or below the SAH's depth): by count on the widest
+/// axis of the centroids.
+fn median(items: &mut [BuildItem], centroids: &Aabb) -> usize {
+    let extent = centroids.extent();
+    let axis = if extent.x >= extent.y && extent.x >= extent.z {
+        0
+    } else if extent.y >= extent.z {
+        1
+    } else {
+        2
+    };
+    let m = items.len() / 2;
+    items.select_nth_unstable_by(m, |a, b| a.centroid[axis].total_cmp(&b.centroid[axis]));
+    m
 }
 
 /// The bin of a centroid's coordinate on `axis`, or None if the centroids do not spread along it.
@@ -487,13 +645,23 @@ fn binning(centroids: &Aabb, axis: usize) -> Option<impl Fn(f32) -> usize> {
         .then_some(move |c: f32| (((c - lo) / width * BINS as f32) as usize).min(BINS - 1))
 }
 
-/// Binned SAH over the three axes: the partition point of the cheapest split, or None when a
-/// leaf is cheaper. (Binning only the axis of the widest centroids, as pbrt-v4 does, traced 7–15%
-/// fewer path samples a second on the 131k-triangle mesh and the two interiors:
-/// docs/engine.md, "Real scenes".)
-fn sah_split(items: &mut [BuildItem], centroids: &Aabb, bounds: Aabb) -> Option<usize> {
-    // (cost, axis, last bin on the left)
-    let mut best = (f32::INFINITY, 0, 0);
+/// The cheapest partition of a node's references by their centroids: SAH cost (unnormalised),
+/// the axis, the last bin on the left, and the two sides' boxes.
+#[derive(Clone, Copy, Debug)]
+struct ObjectSplit {
+    cost: f32,
+    axis: usize,
+    last: usize,
+    left: Aabb,
+    right: Aabb,
+}
+
+/// Binned SAH over the three axes: the cheapest object split, if the centroids spread at all.
+/// (Binning only the axis of the widest centroids, as pbrt-v4 does, traced 7–15% fewer path
+/// samples a second on the 131k-triangle mesh and the two interiors: docs/engine.md, "Real
+/// scenes".)
+fn object_split(items: &[BuildItem], centroids: &Aabb) -> Option<ObjectSplit> {
+    let mut best: Option<ObjectSplit> = None;
     for axis in 0..3 {
         let Some(bin_of) = binning(centroids, axis) else {
             continue;
@@ -505,14 +673,14 @@ fn sah_split(items: &mut [BuildItem], centroids: &Aabb, bounds: Aabb) -> Option<
             counts[b] += 1;
             boxes[b] = boxes[b].union(it.bounds);
         }
-        // Sweep from the right to get the cost of every right-hand side, then from the left.
-        let mut right_area = [0.0f32; BINS];
+        // Sweep from the right to get every right-hand side, then from the left.
+        let mut right_box = [Aabb::EMPTY; BINS];
         let mut right_count = [0usize; BINS];
         let (mut acc, mut n) = (Aabb::EMPTY, 0);
         for i in (1..BINS).rev() {
             acc = acc.union(boxes[i]);
             n += counts[i];
-            right_area[i] = acc.surface_area();
+            right_box[i] = acc;
             right_count[i] = n;
         }
         let (mut acc, mut n) = (Aabb::EMPTY, 0);
@@ -522,32 +690,42 @@ fn sah_split(items: &mut [BuildItem], centroids: &Aabb, bounds: Aabb) -> Option<
             if n == 0 || right_count[i + 1] == 0 {
                 continue;
             }
-            let cost = n as f32 * acc.surface_area() + right_count[i + 1] as f32 * right_area[i + 1];
-            if cost < best.0 {
-                best = (cost, axis, i);
+            let cost =
+                n as f32 * acc.surface_area() + right_count[i + 1] as f32 * right_box[i + 1].surface_area();
+            // (A NaN or infinite cost, from infinite coordinates, never wins.)
+            if cost.is_finite() && best.is_none_or(|b| cost < b.cost) {
+                best = Some(ObjectSplit {
+                    cost,
+                    axis,
+                    last: i,
+                    left: acc,
+                    right: right_box[i + 1],
+                });
             }
         }
     }
-    let parent_area = bounds.surface_area();
-    let split_cost = TRAVERSAL_COST + best.0 / parent_area.max(f32::MIN_POSITIVE);
-    if !best.0.is_finite() || (items.len() <= MAX_LEAF && split_cost >= items.len() as f32) {
-        return None;
-    }
-    let (_, axis, last) = best;
-    let bin_of = binning(centroids, axis).expect("the best split's axis has bins");
-    let mut mid = 0;
-    for i in 0..items.len() {
-        if bin_of(items[i].centroid[axis]) <= last {
-            items.swap(i, mid);
-            mid += 1;
+    best
+}
+
+impl ObjectSplit {
+    /// Moves the left side's references first; the partition point, if both sides hold some.
+    fn partition(&self, items: &mut [BuildItem], centroids: &Aabb) -> Option<usize> {
+        let bin_of = binning(centroids, self.axis).expect("the split's axis has bins");
+        let mut mid = 0;
+        for i in 0..items.len() {
+            if bin_of(items[i].centroid[self.axis]) <= self.last {
+                items.swap(i, mid);
+                mid += 1;
+            }
         }
+        (mid > 0 && mid < items.len()).then_some(mid)
     }
-    (mid > 0 && mid < items.len()).then_some(mid)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::lanes::{F8, V8};
     use crate::geometry::Sphere;
     use crate::sampling::{Sampler, Stream, square_to_uniform_sphere};
 
@@ -632,6 +810,121 @@ mod tests {
                 }
                 assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
             }
+        }
+    }
+
+    /// Long thin triangles crossing a box at random: every one's box is far larger than it is.
+    fn slivers(n: usize) -> Vec<Primitive> {
+        let mut s = Sampler::new(6, Stream::Camera, 0, 0);
+        let mut point = || Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 10.0;
+        (0..n)
+            .map(|i| {
+                let (a, b) = (point(), point());
+                let side = (b - a).cross(Vec3A::Y).normalize_or_zero() * 0.05;
+                Primitive::Triangle(crate::geometry::Triangle {
+                    p: [a, b, a + side],
+                    n: None,
+                    uv: None,
+                    attr: None,
+                    shape: i as u32,
+                    flip: false,
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn spatial_splits_share_slivers_between_leaves_and_find_the_same_hits() {
+        let prims = slivers(400);
+        let bvh = Bvh::build(prims.clone());
+        let copies = bvh.primitives().len();
+        assert_eq!(bvh.distinct_len(), prims.len());
+        assert!(
+            copies > prims.len() && copies <= prims.len() * 3 / 2,
+            "{copies} copies"
+        );
+        let mut shapes: Vec<u32> = bvh.distinct().map(|(_, p)| p.shape()).collect();
+        shapes.sort();
+        assert_eq!(shapes, (0..prims.len() as u32).collect::<Vec<_>>());
+        let mut s = Sampler::new(7, Stream::Camera, 0, 0);
+        let mut batch = Vec::new();
+        for _ in 0..4000 {
+            let o = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 12.0 - Vec3A::ONE;
+            let ray = Ray::new(o, square_to_uniform_sphere(s.next_2d()));
+            let brute = prims
+                .iter()
+                .filter_map(|p| {
+                    p.intersect(&ray, f32::INFINITY)
+                        .map(|h| (h.t, h.b1, h.b2, p.shape()))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let hit = bvh.intersect(&ray, f32::INFINITY);
+            let fast = hit.map(|h| (h.t, h.b1, h.b2, bvh.primitives()[h.prim as usize].shape()));
+            assert_eq!(brute, fast);
+            assert_eq!(bvh.occluded(&ray, f32::INFINITY), brute.is_some());
+            // The packet traversal finds the same primitive (perhaps another leaf's copy).
+            batch.push(ray);
+            if batch.len() == LANES {
+                let v = |f: &dyn Fn(&Ray) -> Vec3A| {
+                    let p: Vec<Vec3A> = batch.iter().map(f).collect();
+                    V8 {
+                        x: F8::from_fn(|l| p[l].x),
+                        y: F8::from_fn(|l| p[l].y),
+                        z: F8::from_fn(|l| p[l].z),
+                    }
+                };
+                let rays = Rays8 {
+                    o: v(&|r| r.o),
+                    d: v(&|r| r.d),
+                    t_max: F8::splat(f32::INFINITY),
+                    active: M8::splat(true),
+                };
+                let hits = bvh.intersect8(&rays);
+                for (lane, ray) in batch.drain(..).enumerate() {
+                    let one = bvh.intersect(&ray, f32::INFINITY);
+                    let shape = |h: Hit| (h.t, h.b1, h.b2, bvh.primitives()[h.prim as usize].shape());
+                    assert_eq!(hits.hit(lane).map(shape), one.map(shape));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_parallel_build_is_the_same_tree_on_any_number_of_threads() {
+        let prims = slivers(3 * PARALLEL_BUILD);
+        let build = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| Bvh::build(prims.clone()))
+        };
+        let (one, two) = (build(1), build(2));
+        let layout = |b: &Bvh| -> (Vec<u32>, Vec<u32>, String) {
+            (
+                b.primitives().iter().map(Primitive::shape).collect(),
+                b.distinct.clone(),
+                match &b.accel {
+                    Accel::Own(nodes) => format!("{nodes:?}"),
+                    other => panic!("{other:?}"),
+                },
+            )
+        };
+        assert_eq!(layout(&one), layout(&two));
+        assert_eq!(one.distinct_len(), prims.len());
+        let mut s = Sampler::new(8, Stream::Camera, 0, 0);
+        for _ in 0..300 {
+            let o = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d()) * 12.0 - Vec3A::ONE;
+            let ray = Ray::new(o, square_to_uniform_sphere(s.next_2d()));
+            let brute = prims
+                .iter()
+                .filter_map(|p| p.intersect(&ray, f32::INFINITY).map(|h| (h.t, p.shape())))
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let fast = two.intersect(&ray, f32::INFINITY);
+            assert_eq!(
+                brute,
+                fast.map(|h| (h.t, two.primitives()[h.prim as usize].shape()))
+            );
         }
     }
 

@@ -9,6 +9,7 @@ mod frame;
 mod instance;
 mod packet;
 mod ray;
+mod spatial_split;
 mod sphere;
 mod triangle;
 

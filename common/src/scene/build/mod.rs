@@ -348,8 +348,8 @@ impl<'a> Builder<'a> {
     /// Area lights learn their primitives once the BVH has put them in their final order.
     fn attach_area_lights(&mut self, bvh: &Bvh) {
         let mut by_shape: HashMap<u32, Vec<u32>> = HashMap::new();
-        for (i, p) in bvh.primitives().iter().enumerate() {
-            by_shape.entry(p.shape()).or_default().push(i as u32);
+        for (slot, p) in bvh.distinct() {
+            by_shape.entry(p.shape()).or_default().push(slot);
         }
         for (shape, radiance) in std::mem::take(&mut self.area_emitters) {
             let prims = by_shape.remove(&shape).unwrap_or_default();
