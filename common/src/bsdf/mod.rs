@@ -18,7 +18,7 @@ pub use dielectric::Dielectric;
 pub use diffuse::Diffuse;
 pub use microfacet::{Distribution, Microfacet, Roughness};
 pub use perturbed::{Perturbation, Perturbed};
-pub use plastic::Plastic;
+pub use plastic::{Coating, Plastic};
 pub use principled::{Principled, eta_from_specular};
 pub use rough_dielectric::RoughDielectric;
 pub use thin_dielectric::ThinDielectric;

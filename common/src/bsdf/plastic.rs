@@ -1,4 +1,5 @@
 use std::f32::consts::FRAC_1_PI;
+use std::sync::Arc;
 
 use glam::{Vec2, Vec3A};
 
@@ -28,28 +29,29 @@ pub struct Plastic {
     pub roughness: Option<Microfacet>,
     /// Probability weight of sampling the coating, from the mean reflectances (as Mitsuba).
     specular_weight: f32,
+    coating: Coating,
+}
+
+/// What the coating passes and reflects back inside, which depends on its roughness and index
+/// alone: scenes give many materials one coating (the staircase six of two), and integrating
+/// a rough one took some 10% of its load, so the scene builder computes each once.
+#[derive(Clone, Debug)]
+pub struct Coating {
     /// Fraction of the diffuse light that the coating reflects back inside.
     internal_reflectance: f32,
     /// Rough coating only: transmittance into the coating against cos θ, 0..=1 in equal steps.
-    transmittance_table: Vec<f32>,
+    transmittance_table: Arc<[f32]>,
 }
 
-const TABLE_SIZE: usize = 64;
-
-impl Plastic {
-    /// A plastic; for a rough coating, its transmittance is integrated numerically here.
-    pub fn new(
-        diffuse: Param<Rgb>,
-        specular: Param<Rgb>,
-        eta: f32,
-        nonlinear: bool,
-        roughness: Option<Microfacet>,
-    ) -> Self {
-        // From the textures' means, as Mitsuba does: the sampling weights do not vary.
-        let (d, s) = (diffuse.mean(), specular.mean());
-        let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
-        let (internal_reflectance, transmittance_table) = match roughness {
-            None => (diffuse_fresnel_reflectance(1.0 / eta), Vec::new()),
+impl Coating {
+    /// The coating of index `eta`, smooth or of the given roughness; a rough one's
+    /// transmittance is integrated numerically here.
+    pub fn new(roughness: Option<Microfacet>, eta: f32) -> Coating {
+        match roughness {
+            None => Coating {
+                internal_reflectance: diffuse_fresnel_reflectance(1.0 / eta),
+                transmittance_table: Arc::new([]),
+            },
             Some(mf) => {
                 // Mitsuba's tables: cos θ at 64 equal steps from 0 to 1 (0 nudged to 1e-6).
                 let mus: Vec<f32> = (0..TABLE_SIZE)
@@ -62,9 +64,48 @@ impl Plastic {
                     .iter()
                     .map(|&mu| rough_reflectance(mf, 1.0 / eta, mu) * mu)
                     .sum();
-                (2.0 * sum / TABLE_SIZE as f32, table)
+                Coating {
+                    internal_reflectance: 2.0 * sum / TABLE_SIZE as f32,
+                    transmittance_table: table,
+                }
             }
-        };
+        }
+    }
+}
+
+const TABLE_SIZE: usize = 64;
+
+impl Plastic {
+    /// A plastic with its own coating (see [`Coating`] for sharing one).
+    pub fn new(
+        diffuse: Param<Rgb>,
+        specular: Param<Rgb>,
+        eta: f32,
+        nonlinear: bool,
+        roughness: Option<Microfacet>,
+    ) -> Self {
+        Self::with_coating(
+            diffuse,
+            specular,
+            eta,
+            nonlinear,
+            roughness,
+            Coating::new(roughness, eta),
+        )
+    }
+
+    /// A plastic whose coating, `Coating::new(roughness, eta)`, is already computed.
+    pub fn with_coating(
+        diffuse: Param<Rgb>,
+        specular: Param<Rgb>,
+        eta: f32,
+        nonlinear: bool,
+        roughness: Option<Microfacet>,
+        coating: Coating,
+    ) -> Self {
+        // From the textures' means, as Mitsuba does: the sampling weights do not vary.
+        let (d, s) = (diffuse.mean(), specular.mean());
+        let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
         Plastic {
             diffuse,
             specular,
@@ -72,8 +113,7 @@ impl Plastic {
             nonlinear,
             roughness,
             specular_weight,
-            internal_reflectance,
-            transmittance_table,
+            coating,
         }
     }
 
@@ -85,15 +125,25 @@ impl Plastic {
         let x = cos.clamp(0.0, 1.0) * (TABLE_SIZE - 1) as f32;
         let i = (x as usize).min(TABLE_SIZE - 2);
         let f = x - i as f32;
-        self.transmittance_table[i] * (1.0 - f) + self.transmittance_table[i + 1] * f
+        let table = &self.coating.transmittance_table;
+        table[i] * (1.0 - f) + table[i + 1] * f
+    }
+
+    /// Whether two plastics use one computed coating (the scene builder shares them).
+    #[cfg(test)]
+    pub(crate) fn shares_coating(&self, other: &Plastic) -> bool {
+        Arc::ptr_eq(
+            &self.coating.transmittance_table,
+            &other.coating.transmittance_table,
+        )
     }
 
     fn diffuse_eval(&self, uv: &TexAt, wi: Vec3A, wo: Vec3A) -> Rgb {
         let diffuse = self.diffuse.at(uv);
         let base = if self.nonlinear {
-            diffuse / (Rgb::ONE - diffuse * self.internal_reflectance)
+            diffuse / (Rgb::ONE - diffuse * self.coating.internal_reflectance)
         } else {
-            diffuse / (1.0 - self.internal_reflectance)
+            diffuse / (1.0 - self.coating.internal_reflectance)
         };
         let inv_eta2 = 1.0 / (self.eta * self.eta);
         base * (self.transmittance(wi.z) * self.transmittance(wo.z) * FRAC_1_PI * inv_eta2 * wo.z)

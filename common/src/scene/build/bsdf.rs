@@ -1,8 +1,8 @@
 //! `<bsdf>`: every material plugin, its roughness and index of refraction.
 
 use crate::bsdf::{
-    Bsdf, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Perturbation, Perturbed, Plastic,
-    Principled, RoughDielectric, Roughness, ThinDielectric, eta_from_specular,
+    Bsdf, Coating, Conductor, Dielectric, Diffuse, Distribution, Microfacet, Perturbation, Perturbed,
+    Plastic, Principled, RoughDielectric, Roughness, ThinDielectric, eta_from_specular,
 };
 use crate::color::Rgb;
 use crate::scene::named;
@@ -139,12 +139,23 @@ impl Builder<'_> {
                         ));
                     }
                 }
-                Bsdf::Plastic(Box::new(Plastic::new(
+                let eta = self.relative_ior(&p, "polypropylene")?;
+                let key = (
+                    roughness.map(|m| (m.distribution, m.alpha_u.to_bits(), m.alpha_v.to_bits())),
+                    eta.to_bits(),
+                );
+                let coating = self
+                    .coatings
+                    .entry(key)
+                    .or_insert_with(|| Coating::new(roughness, eta))
+                    .clone();
+                Bsdf::Plastic(Box::new(Plastic::with_coating(
                     diffuse,
                     specular,
-                    self.relative_ior(&p, "polypropylene")?,
+                    eta,
                     p.boolean("nonlinear")?.unwrap_or(false),
                     roughness,
+                    coating,
                 )))
             }
             "principled" => Bsdf::Principled(Box::new(self.principled(&p)?)),
@@ -429,5 +440,46 @@ impl Builder<'_> {
             Ok(v)
         };
         Ok(read("int_ior", default_int)? / read("ext_ior", "air")?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use crate::bsdf::Bsdf;
+    use crate::scene::Scene;
+
+    /// Plastics of one roughness and index share their coating's table; another roughness, or
+    /// another index, gets its own.
+    #[test]
+    fn plastics_share_coatings_of_equal_roughness_and_index() {
+        let plastic = |alpha: f32, ior: f32, rgb: &str| {
+            format!(
+                r#"<shape type="sphere"><bsdf type="roughplastic"><float name="alpha" value="{alpha}"/>
+                <float name="int_ior" value="{ior}"/><rgb name="diffuse_reflectance" value="{rgb}"/>
+                </bsdf></shape>"#
+            )
+        };
+        let text = format!(
+            r#"<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm"/></sensor>{}{}{}{}</scene>"#,
+            plastic(0.2, 1.5, "0.2, 0.4, 0.6"),
+            plastic(0.2, 1.5, "0.7, 0.1, 0.1"),
+            plastic(0.3, 1.5, "0.2, 0.4, 0.6"),
+            plastic(0.2, 1.6, "0.2, 0.4, 0.6"),
+        );
+        let scene = Scene::from_str(&text, Path::new("t.xml"), &[]).unwrap();
+        let plastics: Vec<_> = scene
+            .bsdfs
+            .iter()
+            .filter_map(|b| match b {
+                Bsdf::Plastic(p) => Some(p),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(plastics.len(), 4);
+        assert!(plastics[0].shares_coating(plastics[1]));
+        assert!(!plastics[0].shares_coating(plastics[2]));
+        assert!(!plastics[0].shares_coating(plastics[3]));
     }
 }

@@ -18,7 +18,7 @@ use glam::Vec3A;
 use super::props::{Ctx, FileRoot, Res};
 use super::xml::{self, Element};
 use super::{IntegratorDecl, Scene, SceneError, ShapeInfo};
-use crate::bsdf::Bsdf;
+use crate::bsdf::{Bsdf, Coating, Distribution};
 use crate::color::Rgb;
 use crate::geometry::{Bvh, Primitive};
 use crate::job::Integrator;
@@ -107,7 +107,12 @@ struct Builder<'a> {
     attributes_read: Vec<String>,
     /// Those each top-level BSDF reads, by index, for the shapes that refer to it.
     bsdf_attributes: HashMap<u32, Vec<String>>,
+    /// Plastics' coatings by (distribution, α_u, α_v bits; index bits), computed once each.
+    coatings: HashMap<CoatingKey, Coating>,
 }
+
+/// A coating's roughness (distribution, α_u and α_v bits) and index bits.
+type CoatingKey = (Option<(Distribution, u32, u32)>, u32);
 
 /// Whether `el` is a `<shape type="shapegroup">`.
 fn is_shape_group(el: &Element) -> bool {
@@ -138,6 +143,7 @@ impl<'a> Builder<'a> {
             groups: HashMap::new(),
             attributes_read: Vec::new(),
             bsdf_attributes: HashMap::new(),
+            coatings: HashMap::new(),
         }
     }
 
