@@ -37,6 +37,10 @@ pub struct Plastic {
 /// a rough one took some 10% of its load, so the scene builder computes each once.
 #[derive(Clone, Debug)]
 pub struct Coating {
+    /// The coating's roughness, none where smooth.
+    roughness: Option<Microfacet>,
+    /// Its relative index of refraction.
+    eta: f32,
     /// Fraction of the diffuse light that the coating reflects back inside.
     internal_reflectance: f32,
     /// Rough coating only: transmittance into the coating against cos θ, 0..=1 in equal steps.
@@ -49,6 +53,8 @@ impl Coating {
     pub fn new(roughness: Option<Microfacet>, eta: f32) -> Coating {
         match roughness {
             None => Coating {
+                roughness,
+                eta,
                 internal_reflectance: diffuse_fresnel_reflectance(1.0 / eta),
                 transmittance_table: Arc::new([]),
             },
@@ -65,6 +71,8 @@ impl Coating {
                     .map(|&mu| rough_reflectance(mf, 1.0 / eta, mu) * mu)
                     .sum();
                 Coating {
+                    roughness,
+                    eta,
                     internal_reflectance: 2.0 * sum / TABLE_SIZE as f32,
                     transmittance_table: table,
                 }
@@ -84,23 +92,14 @@ impl Plastic {
         nonlinear: bool,
         roughness: Option<Microfacet>,
     ) -> Self {
-        Self::with_coating(
-            diffuse,
-            specular,
-            eta,
-            nonlinear,
-            roughness,
-            Coating::new(roughness, eta),
-        )
+        Self::with_coating(diffuse, specular, nonlinear, Coating::new(roughness, eta))
     }
 
-    /// A plastic whose coating, `Coating::new(roughness, eta)`, is already computed.
+    /// A plastic whose coating is already computed: its roughness and index are the coating's.
     pub fn with_coating(
         diffuse: Param<Rgb>,
         specular: Param<Rgb>,
-        eta: f32,
         nonlinear: bool,
-        roughness: Option<Microfacet>,
         coating: Coating,
     ) -> Self {
         // From the textures' means, as Mitsuba does: the sampling weights do not vary.
@@ -109,9 +108,9 @@ impl Plastic {
         Plastic {
             diffuse,
             specular,
-            eta,
+            eta: coating.eta,
             nonlinear,
-            roughness,
+            roughness: coating.roughness,
             specular_weight,
             coating,
         }

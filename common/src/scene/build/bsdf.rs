@@ -152,9 +152,7 @@ impl Builder<'_> {
                 Bsdf::Plastic(Box::new(Plastic::with_coating(
                     diffuse,
                     specular,
-                    eta,
                     p.boolean("nonlinear")?.unwrap_or(false),
-                    roughness,
                     coating,
                 )))
             }
