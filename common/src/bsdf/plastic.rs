@@ -2,6 +2,7 @@ use std::f32::consts::FRAC_1_PI;
 use std::sync::Arc;
 
 use glam::{Vec2, Vec3A};
+use rayon::prelude::*;
 
 use super::BsdfSample;
 use super::fresnel::{diffuse_fresnel_reflectance, fresnel_dielectric, reflect, reflect_about};
@@ -63,18 +64,24 @@ impl Coating {
                 let mus: Vec<f32> = (0..TABLE_SIZE)
                     .map(|i| (i as f32 / (TABLE_SIZE - 1) as f32).max(1e-6))
                     .collect();
-                let table = mus.iter().map(|&mu| rough_transmittance(mf, eta, mu)).collect();
+                // Each entry on its own thread (a million microfacet normals a coating, the
+                // scene's load waits for them); the sum below adds them in order, as before.
+                let table: Vec<f32> = mus
+                    .par_iter()
+                    .map(|&mu| rough_transmittance(mf, eta, mu))
+                    .collect();
                 // Internal: light leaving the base meets the coating from inside (eta inverted),
                 // averaged over the cosine-weighted hemisphere.
-                let sum: f32 = mus
-                    .iter()
+                let internal: Vec<f32> = mus
+                    .par_iter()
                     .map(|&mu| rough_reflectance(mf, 1.0 / eta, mu) * mu)
-                    .sum();
+                    .collect();
+                let sum: f32 = internal.iter().sum();
                 Coating {
                     roughness,
                     eta,
                     internal_reflectance: 2.0 * sum / TABLE_SIZE as f32,
-                    transmittance_table: table,
+                    transmittance_table: table.into(),
                 }
             }
         }
