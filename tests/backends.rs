@@ -1,6 +1,7 @@
 //! Every reference scene gives the same bytes on every SIMD backend this machine has, on one
 //! thread and on two (issue 27): the farm's promise of the same image whatever the workers.
-//! Scenes the lane engine models (cbox and nested-id today) run on it; the rest run on the
+//! Scenes the lane engine models (9 of the 36 today: lit by area lights on Lambertian
+//! triangles, without media, environment or null surfaces) run on it; the rest run on the
 //! scalar integrators whatever the backend, and join the comparison as the engine grows.
 
 use photonfarm::engine::Backend;
@@ -61,5 +62,5 @@ fn every_reference_scene_gives_the_same_bytes_on_every_backend() {
         scenes.len()
     );
     // The comparison covers the lane engine, not only the scalar code.
-    assert!(on_lanes >= 2, "{on_lanes} scenes ran on the lane engine");
+    assert!(on_lanes >= 9, "{on_lanes} scenes ran on the lane engine");
 }

@@ -11,19 +11,29 @@
 //! packets: they head for one light), then compaction. Random numbers come from each path's
 //! own scalar [`Sampler`], so a path's numbers do not depend on its lane.
 //!
-//! What it leaves out, on purpose: everything such scenes do not use. [`DiffuseScene::new`]
-//! refuses other scenes, which the scalar integrators render.
+//! A path that meets any other surface (a sphere or other analytic shape, a material other
+//! than Lambertian: glass, mirrors, plastics) bounces there in the scalar tracer's own code,
+//! lane by lane ([`shade_scalar`]), and goes on in its lane: so the Cornell box with a glass
+//! and a mirror sphere runs on the engine, its walls in lanes.
+//!
+//! What it leaves out, on purpose: media, environments, null surfaces, instances, emitters
+//! that are not Lambertian triangles and filters other than the box. [`DiffuseScene::new`]
+//! refuses such scenes, which the scalar integrators render.
 
 use pulp::WithSimd;
 
 use super::Backend;
 use super::lanes::{F8, LANES, M8, V8};
 use super::math::sincos_quarter;
-use crate::bsdf::Bsdf;
+use glam::Vec2;
+
+use crate::bsdf::{Bsdf, TransportMode};
 use crate::color::Rgb;
 use crate::film::FilmSum;
-use crate::geometry::{Primitive, Rays8, gamma};
+use crate::geometry::{Primitive, Ray, Rays8, gamma};
+use crate::integrator::direct;
 use crate::integrator::path::PathSettings;
+use crate::integrator::walk::Hit;
 use crate::light::Light;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -31,7 +41,7 @@ use crate::texture::Param;
 
 /// Why the prototype cannot render a scene.
 #[derive(Debug, thiserror::Error)]
-#[error("the lane prototype renders only Lambertian triangles lit by area lights: {0}")]
+#[error("the lane engine renders only scenes lit by area lights on Lambertian triangles: {0}")]
 pub struct Unsupported(String);
 
 /// A triangle as the shading stage reads it.
@@ -60,10 +70,32 @@ struct Tri {
     /// Probability of picking its light over the light's area: the light sampling density per
     /// unit area of a point on it (zero if it does not emit).
     light_density: f32,
+    /// Whether its bounces are shaded by the scalar path tracer's code, lane by lane
+    /// ([`shade_scalar`]): an analytic shape, or a material other than Lambertian. Then only
+    /// this field is meaningful.
+    scalar: bool,
 }
 
 /// [`Tri::texture`] of a triangle whose reflectances are fixed.
 const NO_TEXTURE: u32 = u32::MAX;
+
+impl Tri {
+    /// A primitive the scalar code shades.
+    const SCALAR: Tri = Tri {
+        p: [[0.0; 3]; 3],
+        ng: [0.0; 3],
+        n: [[0.0; 3]; 3],
+        smooth: false,
+        flip: 1.0,
+        reflectance: [0.0; 3],
+        back_reflectance: [0.0; 3],
+        two_sided: false,
+        texture: NO_TEXTURE,
+        emission: [0.0; 3],
+        light_density: 0.0,
+        scalar: true,
+    };
+}
 
 /// What the prototype needs of a scene, checked once.
 pub struct DiffuseScene {
@@ -89,18 +121,27 @@ impl DiffuseScene {
         let mut textures = Vec::new();
         let mut texture_of = std::collections::HashMap::new();
         for prim in scene.bvh.primitives() {
-            let Primitive::Triangle(t) = prim else {
-                return no("a shape is not a triangle mesh");
-            };
-            let shape = &scene.shapes[t.shape as usize];
+            if matches!(prim, Primitive::Instance(_)) {
+                return no("a shape is an instance");
+            }
+            let shape = &scene.shapes[prim.shape() as usize];
             let diffuse = |b: &Bsdf| match b {
-                Bsdf::Diffuse(d) => Ok(d.reflectance.clone()),
-                _ => Err(Unsupported("a material is not diffuse".into())),
+                Bsdf::Diffuse(d) => Some(d.reflectance.clone()),
+                _ => None,
             };
             // A two-sided material shades the back with its second BSDF, as the front.
-            let (front, back) = match &scene.bsdfs[shape.bsdf as usize] {
-                Bsdf::TwoSided(pair) => (diffuse(&pair.0)?, Some(diffuse(&pair.1)?)),
-                b => (diffuse(b)?, None),
+            let sides = match &scene.bsdfs[shape.bsdf as usize] {
+                Bsdf::TwoSided(pair) => diffuse(&pair.0).zip(diffuse(&pair.1).map(Some)),
+                b => diffuse(b).map(|f| (f, None)),
+            };
+            let (Primitive::Triangle(t), Some((front, back))) = (prim, sides) else {
+                // Shaded by the scalar code; what it would find on its surface the lanes do
+                // not carry: emission (its MIS needs the previous bounce's point).
+                if shape.light.is_some() {
+                    return no("an emitter is not a Lambertian triangle");
+                }
+                tris.push(Tri::SCALAR);
+                continue;
             };
             let two_sided = back.is_some();
             let fixed = |p: &Param<Rgb>| match p {
@@ -147,6 +188,7 @@ impl DiffuseScene {
                 texture,
                 emission,
                 light_density,
+                scalar: false,
             });
         }
         if scene
@@ -213,8 +255,11 @@ struct Paths {
     o: [Vec<f32>; 3],
     d: [Vec<f32>; 3],
     beta: [Vec<f32>; 3],
-    /// Density of the bounce that made the ray (0 for a camera ray: no MIS).
+    /// Density of the bounce that made the ray (0 for a camera ray or a specular bounce: no
+    /// MIS).
     prev_pdf: Vec<f32>,
+    /// Product of the relative indices of refraction crossed (`Walk::eta`, for roulette).
+    eta: Vec<f32>,
     /// The closest hit of the ray, from the intersection stage.
     t: Vec<f32>,
     b: [Vec<f32>; 2],
@@ -247,6 +292,7 @@ impl Row<'_> {
             d: lanes3(len),
             beta: std::array::from_fn(|_| vec![1.0; len]),
             prev_pdf: vec![0.0; len],
+            eta: vec![1.0; len],
             t: vec![0.0; len],
             b: [vec![0.0; len], vec![0.0; len]],
             tri: vec![0; len],
@@ -363,6 +409,7 @@ fn compact(paths: &mut Paths) {
                 paths.beta[c][k] = paths.beta[c][i];
             }
             paths.prev_pdf[k] = paths.prev_pdf[i];
+            paths.eta[k] = paths.eta[i];
         }
         k += 1;
     }
@@ -581,7 +628,17 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
 
     // The random numbers of this bounce, in the scalar path tracer's order: light pick, light
     // point, BSDF lobe (unused here), BSDF direction; roulette's comes after.
-    let [u_sel, u_l0, u_l1, _, u_b0, u_b1] = draw::<6>(paths, start, live);
+    let [u_sel, u_l0, u_l1, u_lobe, u_b0, u_b1] = draw::<6>(paths, start, live);
+    // Lanes on surfaces the lanes do not model bounce in scalar code; what they become is
+    // stored after the lanes' results.
+    let scalar = live & M8::from_fn(|i| ds.tris[idx[i] as usize].scalar);
+    live = live & !scalar;
+    let bounced: [Option<Bounce>; LANES] = std::array::from_fn(|i| {
+        let u = [u_sel, u_l0, u_l1, u_lobe, u_b0, u_b1].map(|u| u.0[i]);
+        scalar
+            .get(i)
+            .then(|| shade_scalar(scene, ds, depth, start + i, u, paths, out))
+    });
 
     // A light sample: the light and triangle picked in scalar code (binary searches), the
     // point and its weight in lanes.
@@ -668,7 +725,8 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
 
     // Roulette from the scalar tracer's depth on (its depth counts this bounce).
     let beta = if depth + 1 > ds.rr_depth {
-        let q = beta.x.max(beta.y).max(beta.z).min(F8::splat(0.95));
+        let eta = F8::load(&paths.eta, start);
+        let q = (beta.x.max(beta.y).max(beta.z) * eta * eta).min(F8::splat(0.95));
         let [u_rr] = draw::<1>(paths, start, live);
         live = live & u_rr.lt(q);
         beta.scale(1.0 / q)
@@ -683,6 +741,95 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     for i in 0..LANES {
         paths.alive[start + i] = live.get(i);
     }
+    for (lane, b) in bounced.into_iter().enumerate() {
+        let Some(b) = b else { continue };
+        let i = start + lane;
+        for k in 0..3 {
+            paths.o[k][i] = b.ray.o[k];
+            paths.d[k][i] = b.ray.d[k];
+            paths.beta[k][i] = b.beta[k];
+        }
+        (paths.prev_pdf[i], paths.eta[i], paths.alive[i]) = (b.prev_pdf, b.eta, b.alive);
+    }
+}
+
+/// A path's state after a bounce in scalar code.
+struct Bounce {
+    ray: Ray,
+    beta: Rgb,
+    prev_pdf: f32,
+    eta: f32,
+    alive: bool,
+}
+
+/// One bounce of path `i`, on a surface the lanes do not model, by the scalar path tracer's
+/// own code (`integrator/path.rs`: the light sample if the material has a smooth part, the
+/// BSDF sample, `Walk::follow`, `Walk::survives_roulette`), with `u`, the numbers the lane
+/// group drew for it in the scalar tracer's order. Its light sample's shadow ray is traced
+/// here, and its contribution added at once: the pixel sums in the scalar tracer's order all
+/// the same, as nothing else of this bounce reaches it. Returns what the path becomes, for
+/// [`shade`] to store after the lanes' results.
+fn shade_scalar(
+    scene: &Scene,
+    ds: &DiffuseScene,
+    depth: u32,
+    i: usize,
+    u: [f32; 6],
+    paths: &mut Paths,
+    out: &mut [Rgb],
+) -> Bounce {
+    let at = |v: &[Vec<f32>; 3]| glam::Vec3A::new(v[0][i], v[1][i], v[2][i]);
+    let ray = Ray::new(at(&paths.o), at(&paths.d));
+    let hit = crate::geometry::Hit {
+        t: paths.t[i],
+        prim: paths.tri[i],
+        b1: paths.b[0][i],
+        b2: paths.b[1][i],
+        inner: 0,
+    };
+    let sp = scene.bvh.primitives()[hit.prim as usize].surface(&ray, &hit);
+    let h = Hit::new(scene, sp, -ray.d);
+    let mut beta = Rgb::from(at(&paths.beta).to_array());
+    let mut end = Bounce {
+        ray,
+        beta,
+        prev_pdf: 0.0,
+        eta: paths.eta[i],
+        alive: false,
+    };
+    let sampler = &mut paths.sampler[i];
+    if h.bsdf.has_smooth() {
+        out[paths.pixel[i] as usize] +=
+            beta * direct::light_sample(scene, &h, None, (u[0], Vec2::new(u[1], u[2])), 1.0, sampler);
+    }
+    let Some(bs) = h.bsdf.sample(
+        &h.at(),
+        h.wo_local,
+        u[3],
+        Vec2::new(u[4], u[5]),
+        TransportMode::Radiance,
+    ) else {
+        return end;
+    };
+    let wo = h.frame.to_world(bs.wo);
+    beta *= bs.weight;
+    let eta = end.eta * bs.eta;
+    if depth + 1 > ds.rr_depth {
+        let q = (beta.max_element() * eta * eta).min(0.95);
+        if sampler.next_1d() >= q {
+            return end;
+        }
+        beta /= q;
+    }
+    end = Bounce {
+        ray: Scene::spawn_ray(&h.sp, wo),
+        beta,
+        // A specular bounce's emission is found in full, as after a camera ray.
+        prev_pdf: if bs.delta { 0.0 } else { bs.pdf },
+        eta,
+        alive: beta != Rgb::ZERO,
+    };
+    end
 }
 
 #[cfg(test)]
@@ -789,11 +936,13 @@ mod tests {
             t.replacen("</scene>", &strip, 1)
         };
         let same = |t: String| t;
-        let scenes: [(&str, &dyn Fn(String) -> String); 4] = [
+        let scenes: [(&str, &dyn Fn(String) -> String); 5] = [
             ("cbox.xml", &same),
             ("meshes.xml", &same),
             ("cbox.xml", &two_sided_back),
             ("cbox.xml", &textured),
+            // A glass sphere and a mirror one, shaded by the scalar code lane by lane.
+            ("cbox-spheres.xml", &same),
         ];
         for (name, edit) in scenes {
             let res = 48;
@@ -809,7 +958,7 @@ mod tests {
                 None => text,
             };
             let scene = Scene::from_str(&text, &path, &[("res".to_string(), res.to_string())]).unwrap();
-            assert!(scene.bvh.primitives().len() > 36 || name == "cbox.xml");
+            assert!(scene.bvh.primitives().len() > 36 || name.starts_with("cbox"));
             let settings = RenderSettings {
                 seed: 7,
                 method: Method::Path(PathSettings::from_scene(&scene)),
@@ -837,13 +986,13 @@ mod tests {
 
     #[test]
     fn refuses_what_it_does_not_model() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox-spheres.xml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/fog.xml");
         let scene = Scene::load(&path, &[("res".to_string(), "16".to_string())]).unwrap();
         let e = DiffuseScene::new(&scene, &PathSettings::from_scene(&scene))
             .err()
-            .expect("spheres are refused")
+            .expect("media are refused")
             .to_string();
-        assert!(e.contains("renders only Lambertian triangles"), "{e}");
+        assert!(e.contains("media"), "{e}");
     }
 
     #[test]
