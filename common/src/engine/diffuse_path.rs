@@ -33,7 +33,7 @@ use crate::film::FilmSum;
 use crate::geometry::{Primitive, Ray, Rays8, gamma};
 use crate::integrator::direct;
 use crate::integrator::path::PathSettings;
-use crate::integrator::walk::Hit;
+use crate::integrator::walk::{Hit, Walk};
 use crate::light::Light;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -647,7 +647,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     // stored after the lanes' results.
     let scalar = live & M8::from_fn(|i| ds.tris[idx[i] as usize].scalar);
     live = live & !scalar;
-    let bounced: [Option<Bounce>; LANES] = std::array::from_fn(|i| {
+    let bounced: [Option<Option<Walk>>; LANES] = std::array::from_fn(|i| {
         let u = [u_sel, u_l0, u_l1, u_lobe, u_b0, u_b1].map(|u| u.0[i]);
         scalar
             .get(i)
@@ -755,34 +755,29 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     for i in 0..LANES {
         paths.alive[start + i] = live.get(i);
     }
-    for (lane, b) in bounced.into_iter().enumerate() {
-        let Some(b) = b else { continue };
+    for (lane, walk) in bounced.into_iter().enumerate() {
+        let Some(walk) = walk else { continue };
         let i = start + lane;
+        paths.alive[i] = walk.is_some();
+        let Some(w) = walk else { continue };
         for k in 0..3 {
-            paths.o[k][i] = b.ray.o[k];
-            paths.d[k][i] = b.ray.d[k];
-            paths.beta[k][i] = b.beta[k];
+            paths.o[k][i] = w.ray.o[k];
+            paths.d[k][i] = w.ray.d[k];
+            paths.beta[k][i] = w.beta[k];
         }
-        (paths.prev_pdf[i], paths.eta[i], paths.alive[i]) = (b.prev_pdf, b.eta, b.alive);
+        // A specular bounce's emission is found in full, as after a camera ray.
+        paths.prev_pdf[i] = w.prev.filter(|p| !p.delta).map_or(0.0, |p| p.pdf);
+        paths.eta[i] = w.eta;
     }
-}
-
-/// A path's state after a bounce in scalar code.
-struct Bounce {
-    ray: Ray,
-    beta: Rgb,
-    prev_pdf: f32,
-    eta: f32,
-    alive: bool,
 }
 
 /// One bounce of path `i`, on a surface the lanes do not model, by the scalar path tracer's
 /// own code (`integrator/path.rs`: the light sample if the material has a smooth part, the
-/// BSDF sample, `Walk::follow`, `Walk::survives_roulette`), with `u`, the numbers the lane
-/// group drew for it in the scalar tracer's order. Its light sample's shadow ray is traced
-/// here, and its contribution added at once: the pixel sums in the scalar tracer's order all
-/// the same, as nothing else of this bounce reaches it. Returns what the path becomes, for
-/// [`shade`] to store after the lanes' results.
+/// BSDF sample, [`Walk::follow`] and [`Walk::survives_roulette`]), with `u`, the numbers the
+/// lane group drew for it in the scalar tracer's order. Its light sample's shadow ray is
+/// traced here, and its contribution added at once: the pixel sums in the scalar tracer's
+/// order all the same, as nothing else of this bounce reaches it. Returns the walk the path
+/// goes on as, if it does, for [`shade`] to store after the lanes' results.
 fn shade_scalar(
     scene: &Scene,
     ds: &DiffuseScene,
@@ -791,7 +786,7 @@ fn shade_scalar(
     u: [f32; 6],
     paths: &mut Paths,
     out: &mut [Rgb],
-) -> Bounce {
+) -> Option<Walk> {
     let at = |v: &[Vec<f32>; 3]| glam::Vec3A::new(v[0][i], v[1][i], v[2][i]);
     let ray = Ray::new(at(&paths.o), at(&paths.d));
     let hit = crate::geometry::Hit {
@@ -803,47 +798,22 @@ fn shade_scalar(
     };
     let sp = scene.bvh.primitives()[hit.prim as usize].surface(&ray, &hit);
     let h = Hit::new(scene, sp, -ray.d);
-    let mut beta = Rgb::from(at(&paths.beta).to_array());
-    let mut end = Bounce {
-        ray,
-        beta,
-        prev_pdf: 0.0,
-        eta: paths.eta[i],
-        alive: false,
-    };
+    let mut walk = Walk::new(ray, Rgb::from(at(&paths.beta).to_array()), None);
+    (walk.eta, walk.depth) = (paths.eta[i], depth);
     let sampler = &mut paths.sampler[i];
     if h.bsdf.has_smooth() {
         out[paths.pixel[i] as usize] +=
-            beta * direct::light_sample(scene, &h, None, (u[0], Vec2::new(u[1], u[2])), 1.0, sampler);
+            walk.beta * direct::light_sample(scene, &h, None, (u[0], Vec2::new(u[1], u[2])), 1.0, sampler);
     }
-    let Some(bs) = h.bsdf.sample(
+    let bs = h.bsdf.sample(
         &h.at(),
         h.wo_local,
         u[3],
         Vec2::new(u[4], u[5]),
         TransportMode::Radiance,
-    ) else {
-        return end;
-    };
-    let wo = h.frame.to_world(bs.wo);
-    beta *= bs.weight;
-    let eta = end.eta * bs.eta;
-    if depth + 1 > ds.rr_depth {
-        let q = (beta.max_element() * eta * eta).min(0.95);
-        if sampler.next_1d() >= q {
-            return end;
-        }
-        beta /= q;
-    }
-    end = Bounce {
-        ray: Scene::spawn_ray(&h.sp, wo),
-        beta,
-        // A specular bounce's emission is found in full, as after a camera ray.
-        prev_pdf: if bs.delta { 0.0 } else { bs.pdf },
-        eta,
-        alive: beta != Rgb::ZERO,
-    };
-    end
+    )?;
+    walk.follow(&h, &bs);
+    walk.survives_roulette(ds.rr_depth, sampler).then_some(walk)
 }
 
 #[cfg(test)]

@@ -182,7 +182,10 @@ pub(super) fn find(items: &[BuildItem], prims: &[Primitive], bounds: Aabb) -> Op
                 continue;
             };
             // Each plane's crossings once, for the slabs on both its sides.
-            let at = |b: usize| (planes.plane(b), Crossings::new(tri, axis, planes.plane(b)));
+            let at = |b: usize| {
+                let plane = planes.plane(b);
+                (plane, Crossings::new(tri, axis, plane))
+            };
             let mut lo = at(first);
             for (b, bin) in boxes.iter_mut().enumerate().take(last + 1).skip(first) {
                 let hi = at(b + 1);
