@@ -327,22 +327,36 @@ fn add_sample_sets<S: Fn(u32, u32) -> (Rgb, Vec2) + Sync>(
     count: u32,
     set: impl Fn(u32) -> S,
 ) {
+    // A box film divides by passes: each of the pass's samples weighs 1/count (exact for a
+    // power of two). A filtered film divides by the filter weights it sums.
+    let weight = if scene.filter.is_box() {
+        1.0 / count as f32
+    } else {
+        1.0
+    };
     for j in 0..count {
         let sample = set(j);
-        if scene.filter.is_box() {
-            // A box film divides by passes: each of the pass's samples weighs 1/count (exact
-            // for a power of two).
-            let weight = 1.0 / count as f32;
-            add_box_samples(scene, film, |x, y| {
-                let (v, u) = sample(x, y);
-                (v * weight, u)
-            });
-        } else {
-            // A filtered film divides by the filter weights it sums.
-            splat::add_filtered_samples(scene, film, sample);
-        }
+        add_rows(scene, film, |y| {
+            (0..scene.width())
+                .map(|x| {
+                    let (v, u) = sample(x, y);
+                    (v * weight, u)
+                })
+                .collect()
+        });
     }
     film.passes += 1;
+}
+
+/// Adds one sample per pixel through the scene's filter, computed in parallel by rows: `row(y)`
+/// gives row y's values, each with its offset within its pixel (the lane engine traces a row's
+/// paths together). The caller counts the pass.
+pub(crate) fn add_rows(scene: &Scene, film: &mut FilmSum, row: impl Fn(u32) -> Vec<(Rgb, Vec2)> + Sync) {
+    if scene.filter.is_box() {
+        add_box_rows(scene, film, row);
+    } else {
+        splat::add_filtered_rows(scene, film, row);
+    }
 }
 
 /// Adds pass `pass`'s features: one walk per pixel from the pass's camera sample, then the
@@ -516,16 +530,8 @@ fn light_path_pass(
     film.passes += 1;
 }
 
-/// Box filter: one sample per pixel, computed in parallel by rows.
-fn add_box_samples(scene: &Scene, film: &mut FilmSum, sample: impl Fn(u32, u32) -> (Rgb, Vec2) + Sync) {
-    add_box_rows(scene, film, |y| {
-        (0..scene.width()).map(|x| sample(x, y).0).collect()
-    });
-}
-
-/// Box filter: one sample per pixel, computed in parallel by rows, `row(y)` giving row y's
-/// values (the lane engine traces a row's paths together).
-pub(crate) fn add_box_rows(scene: &Scene, film: &mut FilmSum, row: impl Fn(u32) -> Vec<Rgb> + Sync) {
+/// Box filter: [`add_rows`]'s samples count for their pixels alone.
+fn add_box_rows(scene: &Scene, film: &mut FilmSum, row: impl Fn(u32) -> Vec<(Rgb, Vec2)> + Sync) {
     let w = scene.width();
     let rows: Vec<(Vec<[i64; 3]>, u64)> = (0..scene.height())
         .into_par_iter()
@@ -533,7 +539,7 @@ pub(crate) fn add_box_rows(scene: &Scene, film: &mut FilmSum, row: impl Fn(u32) 
             let mut nonfinite = 0;
             let row = row(y)
                 .into_iter()
-                .map(|v| {
+                .map(|(v, _)| {
                     to_fixed(v).unwrap_or_else(|| {
                         nonfinite += 1;
                         [0; 3]

@@ -28,11 +28,12 @@ struct BandBuffer {
 }
 
 /// Adds one sample per pixel, each splatted over its neighbours with the scene's filter and
-/// weighted as Mitsuba's film does; the film becomes weighted.
-pub(super) fn add_filtered_samples(
+/// weighted as Mitsuba's film does; the film becomes weighted. `row(y)` gives row y's samples,
+/// each with its offset within its pixel.
+pub(super) fn add_filtered_rows(
     scene: &Scene,
     film: &mut FilmSum,
-    sample: impl Fn(u32, u32) -> (Rgb, Vec2) + Sync,
+    row: impl Fn(u32) -> Vec<(Rgb, Vec2)> + Sync,
 ) {
     film.make_weighted();
     let (w, h) = (scene.width(), scene.height());
@@ -40,7 +41,7 @@ pub(super) fn add_filtered_samples(
     for group in (0..bands).step_by(BANDS_AT_ONCE as usize) {
         let buffers: Vec<BandBuffer> = (group..(group + BANDS_AT_ONCE).min(bands))
             .into_par_iter()
-            .map(|band| splat_band(scene, band * BAND_ROWS, ((band + 1) * BAND_ROWS).min(h), &sample))
+            .map(|band| splat_band(scene, band * BAND_ROWS, ((band + 1) * BAND_ROWS).min(h), &row))
             .collect();
         for b in buffers {
             film.nonfinite += b.nonfinite;
@@ -58,7 +59,7 @@ pub(super) fn add_filtered_samples(
 }
 
 /// Renders rows `y0..y1` and splats them into a buffer of the rows they reach.
-fn splat_band(scene: &Scene, y0: u32, y1: u32, sample: &impl Fn(u32, u32) -> (Rgb, Vec2)) -> BandBuffer {
+fn splat_band(scene: &Scene, y0: u32, y1: u32, row: &impl Fn(u32) -> Vec<(Rgb, Vec2)>) -> BandBuffer {
     let filter = scene.filter;
     let n = filter.reach() as i64;
     let w = scene.width() as i64;
@@ -72,8 +73,7 @@ fn splat_band(scene: &Scene, y0: u32, y1: u32, sample: &impl Fn(u32, u32) -> (Rg
     };
     let (mut wx, mut wy) = (Vec::new(), Vec::new());
     for y in y0..y1 {
-        for x in 0..scene.width() {
-            let (l, u) = sample(x, y);
+        for (x, (l, u)) in (0..).zip(row(y)) {
             if !l.is_finite() {
                 buf.nonfinite += 1;
                 continue;
