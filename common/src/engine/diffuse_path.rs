@@ -30,7 +30,7 @@ use glam::Vec2;
 use crate::bsdf::{Bsdf, TransportMode};
 use crate::color::Rgb;
 use crate::film::FilmSum;
-use crate::geometry::{Primitive, Ray, Rays8, gamma};
+use crate::geometry::{Primitive, Ray, Rays8, Triangle, gamma};
 use crate::integrator::direct;
 use crate::integrator::path::PathSettings;
 use crate::integrator::walk::{Hit, Walk};
@@ -114,24 +114,39 @@ impl DiffuseScene {
         if !scene.media.is_empty() || scene.environment.is_some() || scene.null_shapes > 0 {
             return no("the scene has media, an environment or null surfaces");
         }
-        let mut tris = Vec::with_capacity(scene.bvh.primitives().len());
+        if scene
+            .lights
+            .iter()
+            .any(|l| !matches!(l, Light::Area(a) if a.sphere.is_none()))
+        {
+            return no("a light is not an area light on triangles");
+        }
+        let prims = scene.bvh.primitives();
+        if prims.iter().any(|p| matches!(p, Primitive::Instance(_))) {
+            return no("a shape is an instance");
+        }
+        // Paths meet surfaces about in proportion to their area. Where the lanes would shade
+        // less than 60% of it, their overhead outweighs them: a Cornell box of rough plastic
+        // walls ran at 1.15x the scalar tracer's time on the engine, the staircase interior
+        // (54% Lambertian) at 1.02x (docs/engine.md). Checked before the triangles are copied:
+        // that took 51-57 ms on the staircase, on every renderer made (every worker batch).
+        let (mut lanes, mut total) = (0.0f64, 0.0f64);
+        for (_, prim) in scene.bvh.distinct() {
+            let area = prim.area() as f64;
+            total += area;
+            if lane_shaded(scene, prim).is_some() {
+                lanes += area;
+            }
+        }
+        if lanes < 0.6 * total {
+            return no("most of the scene's surface is not Lambertian triangles");
+        }
+        let mut tris = Vec::with_capacity(prims.len());
         let mut textures = Vec::new();
         let mut texture_of = std::collections::HashMap::new();
-        for prim in scene.bvh.primitives() {
-            if matches!(prim, Primitive::Instance(_)) {
-                return no("a shape is an instance");
-            }
+        for prim in prims {
             let shape = &scene.shapes[prim.shape() as usize];
-            let diffuse = |b: &Bsdf| match b {
-                Bsdf::Diffuse(d) => Some(d.reflectance.clone()),
-                _ => None,
-            };
-            // A two-sided material shades the back with its second BSDF, as the front.
-            let sides = match &scene.bsdfs[shape.bsdf as usize] {
-                Bsdf::TwoSided(pair) => diffuse(&pair.0).zip(diffuse(&pair.1).map(Some)),
-                b => diffuse(b).map(|f| (f, None)),
-            };
-            let (Primitive::Triangle(t), Some((front, back))) = (prim, sides) else {
+            let Some((t, front, back)) = lane_shaded(scene, prim) else {
                 // Shaded by the scalar code; what it would find on its surface the lanes do
                 // not carry: emission (its MIS needs the previous bounce's point).
                 if shape.light.is_some() {
@@ -146,12 +161,12 @@ impl DiffuseScene {
                 Param::Textured(_) => None,
             };
             let (reflectance, back_reflectance, texture) =
-                match (fixed(&front), back.as_ref().map_or(Some([0.0; 3]), fixed)) {
+                match (fixed(front), back.map_or(Some([0.0; 3]), fixed)) {
                     (Some(f), Some(b)) => (f, b, NO_TEXTURE),
                     // One entry per material, whatever its triangles.
                     _ => {
                         let k = *texture_of.entry(shape.bsdf).or_insert_with(|| {
-                            textures.push((front.clone(), back.unwrap_or(front)));
+                            textures.push((front.clone(), back.unwrap_or(front).clone()));
                             textures.len() as u32 - 1
                         });
                         ([0.0; 3], [0.0; 3], k)
@@ -188,34 +203,32 @@ impl DiffuseScene {
                 scalar: false,
             });
         }
-        if scene
-            .lights
-            .iter()
-            .any(|l| !matches!(l, Light::Area(a) if a.sphere.is_none()))
-        {
-            return no("a light is not an area light on triangles");
-        }
-        // Paths meet surfaces about in proportion to their area. Where the lanes would shade
-        // less than 60% of it, their overhead outweighs them: a Cornell box of rough plastic
-        // walls ran at 1.15x the scalar tracer's time on the engine, the staircase interior
-        // (54% Lambertian) at 1.02x (docs/engine.md).
-        let (mut lanes, mut total) = (0.0f64, 0.0f64);
-        for (slot, prim) in scene.bvh.distinct() {
-            let area = prim.area() as f64;
-            total += area;
-            if !tris[slot as usize].scalar {
-                lanes += area;
-            }
-        }
-        if lanes < 0.6 * total {
-            return no("most of the scene's surface is not Lambertian triangles");
-        }
         Ok(DiffuseScene {
             tris,
             textures,
             max_depth: settings.max_depth.unwrap_or(u32::MAX),
             rr_depth: settings.rr_depth,
         })
+    }
+}
+
+/// A triangle the lanes shade, with its front's reflectance and, if two-sided, its back's.
+type LaneShaded<'s> = (&'s Triangle, &'s Param<Rgb>, Option<&'s Param<Rgb>>);
+
+/// The triangle and its (front, back) reflectances if the lanes shade `prim`: a triangle in a
+/// Lambertian material, or a two-sided one of two (whose back is shaded with its second BSDF,
+/// as the front); `None` for what the scalar code shades.
+fn lane_shaded<'s>(scene: &'s Scene, prim: &'s Primitive) -> Option<LaneShaded<'s>> {
+    let Primitive::Triangle(t) = prim else {
+        return None;
+    };
+    let diffuse = |b: &'s Bsdf| match b {
+        Bsdf::Diffuse(d) => Some(&d.reflectance),
+        _ => None,
+    };
+    match &scene.bsdfs[scene.shapes[prim.shape() as usize].bsdf as usize] {
+        Bsdf::TwoSided(pair) => Some((t, diffuse(&pair.0)?, Some(diffuse(&pair.1)?))),
+        b => Some((t, diffuse(b)?, None)),
     }
 }
 
