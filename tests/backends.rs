@@ -1,6 +1,6 @@
 //! Every reference scene gives the same bytes on every SIMD backend this machine has, on one
 //! thread and on two (issue 27): the farm's promise of the same image whatever the workers.
-//! Scenes the lane engine models (9 of the 36 today: lit by area lights on Lambertian
+//! Scenes the lane engine models (11 of the 36 today: lit by area lights on Lambertian
 //! triangles, without media, environment or null surfaces) run on it; the rest run on the
 //! scalar integrators whatever the backend, and join the comparison as the engine grows.
 

@@ -17,8 +17,8 @@
 //! and a mirror sphere runs on the engine, its walls in lanes.
 //!
 //! What it leaves out, on purpose: media, environments, null surfaces, instances and emitters
-//! that are not Lambertian triangles. [`DiffuseScene::new`]
-//! refuses such scenes, which the scalar integrators render.
+//! that are not Lambertian triangles. [`DiffuseScene::new`] refuses such scenes, and those
+//! that are mostly other surfaces, which the scalar integrators render.
 
 use pulp::WithSimd;
 
@@ -303,8 +303,8 @@ fn lanes3(len: usize) -> [Vec<f32>; 3] {
 }
 
 impl Row<'_> {
-    #[inline(always)]
     /// Each pixel's radiance and its sample's offset within the pixel, for the filter.
+    #[inline(always)]
     fn trace(&self) -> Vec<(Rgb, Vec2)> {
         let (scene, ds) = (self.scene, self.ds);
         let w = scene.width() as usize;
