@@ -135,6 +135,16 @@ impl Plastic {
         table[i] * (1.0 - f) + table[i + 1] * f
     }
 
+    /// What the lane engine's plastic needs besides the public fields: the probability weight
+    /// of the coating, the coating's internal reflectance and its transmittance table.
+    pub(crate) fn coating_parts(&self) -> (f32, f32, &Arc<[f32]>) {
+        (
+            self.specular_weight,
+            self.coating.internal_reflectance,
+            &self.coating.transmittance_table,
+        )
+    }
+
     /// Whether two plastics use one computed coating (the scene builder shares them).
     #[cfg(test)]
     pub(crate) fn shares_coating(&self, other: &Plastic) -> bool {

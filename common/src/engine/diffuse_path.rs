@@ -1,6 +1,6 @@
-//! The lane engine's prototype: path tracing of Lambertian triangles (flat or with vertex
-//! normals) lit by area lights (the Cornell box), as the scalar path tracer does it
-//! (`integrator/path.rs`: the same depth, next event estimation weighted by the power
+//! The lane engine's path tracer: triangles in Lambertian or GGX rough plastic materials
+//! ([`super::plastic`]), flat or with vertex normals, path-traced as the scalar path tracer
+//! does it (`integrator/path.rs`: the same depth, next event estimation weighted by the power
 //! heuristic, Russian roulette and random numbers in the same order), but a film row's paths
 //! at once, eight per lane group.
 //!
@@ -11,13 +11,17 @@
 //! packets: they head for one light), then compaction. Random numbers come from each path's
 //! own scalar [`Sampler`], so a path's numbers do not depend on its lane.
 //!
-//! A path that meets any other surface (a sphere or other analytic shape, a material other
-//! than Lambertian: glass, mirrors, plastics) bounces there in the scalar tracer's own code,
+//! Area lights on triangles are sampled in lanes; other lights (environments, points, spots,
+//! the sun) by their scalar code, lane by lane, and paths that leave the scene find the
+//! environment as `Walk::escaped` does.
+//!
+//! A path that meets any other surface (a sphere or other analytic shape, another material:
+//! glass, mirrors, metals, Beckmann plastics) bounces there in the scalar tracer's own code,
 //! lane by lane ([`shade_scalar`]), and goes on in its lane: so the Cornell box with a glass
 //! and a mirror sphere runs on the engine, its walls in lanes.
 //!
-//! What it leaves out, on purpose: media, environments, null surfaces, instances and emitters
-//! that are not Lambertian triangles. [`DiffuseScene::new`] refuses such scenes, and those
+//! What it leaves out, on purpose: media, null surfaces, instances and emitters that are not
+//! triangles it shades. [`DiffuseScene::new`] refuses such scenes, and those
 //! that are mostly other surfaces, which the scalar integrators render.
 
 use pulp::WithSimd;
@@ -25,23 +29,24 @@ use pulp::WithSimd;
 use super::Backend;
 use super::lanes::{F8, LANES, M8, V8};
 use super::math::sincos_quarter;
+use super::plastic::{LanePlastic, NO_PLASTIC, Plastics};
 use glam::Vec2;
 
-use crate::bsdf::{Bsdf, TransportMode};
+use crate::bsdf::{Bsdf, Plastic, TransportMode};
 use crate::color::Rgb;
 use crate::film::FilmSum;
 use crate::geometry::{Primitive, Ray, Rays8, Triangle, gamma};
 use crate::integrator::direct;
 use crate::integrator::path::PathSettings;
 use crate::integrator::walk::{Hit, Walk};
-use crate::light::Light;
+use crate::light::{Light, LightSample};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::texture::Param;
 
 /// Why the prototype cannot render a scene.
 #[derive(Debug, thiserror::Error)]
-#[error("the lane engine renders only scenes lit by area lights on Lambertian triangles: {0}")]
+#[error("the lane engine does not model this scene: {0}")]
 pub struct Unsupported(String);
 
 /// A triangle as the shading stage reads it.
@@ -62,6 +67,9 @@ struct Tri {
     back_reflectance: [f32; 3],
     /// Whether the back scatters too (Mitsuba's `twosided`).
     two_sided: bool,
+    /// The (front, back) material's index in [`DiffuseScene::plastics`] if it is a rough
+    /// plastic ([`NO_PLASTIC`] if Lambertian); its diffuse reflectance is `reflectance`'s.
+    plastic: [u32; 2],
     /// Its (front, back) reflectances in [`DiffuseScene::textures`] if either is textured
     /// (then `reflectance` and `back_reflectance` are unused), else [`NO_TEXTURE`].
     texture: u32,
@@ -90,6 +98,7 @@ impl Tri {
         reflectance: [0.0; 3],
         back_reflectance: [0.0; 3],
         two_sided: false,
+        plastic: [NO_PLASTIC; 2],
         texture: NO_TEXTURE,
         emission: [0.0; 3],
         light_density: 0.0,
@@ -102,6 +111,8 @@ pub struct DiffuseScene {
     tris: Vec<Tri>,
     /// Textured (front, back) reflectances, looked up lane by lane.
     textures: Vec<(Param<Rgb>, Param<Rgb>)>,
+    /// The rough plastics the lanes shade.
+    plastics: Vec<LanePlastic>,
     max_depth: u32,
     rr_depth: u32,
 }
@@ -111,24 +122,18 @@ impl DiffuseScene {
     /// `settings`.
     pub fn new(scene: &Scene, settings: &PathSettings) -> Result<DiffuseScene, Unsupported> {
         let no = |why: &str| Err(Unsupported(why.to_string()));
-        if !scene.media.is_empty() || scene.environment.is_some() || scene.null_shapes > 0 {
-            return no("the scene has media, an environment or null surfaces");
-        }
-        if scene
-            .lights
-            .iter()
-            .any(|l| !matches!(l, Light::Area(a) if a.sphere.is_none()))
-        {
-            return no("a light is not an area light on triangles");
+        if !scene.media.is_empty() || scene.null_shapes > 0 {
+            return no("the scene has media or null surfaces");
         }
         let prims = scene.bvh.primitives();
         if prims.iter().any(|p| matches!(p, Primitive::Instance(_))) {
             return no("a shape is an instance");
         }
         // Paths meet surfaces about in proportion to their area. Where the lanes would shade
-        // less than 60% of it, their overhead outweighs them: a Cornell box of rough plastic
+        // less than 60% of it, their overhead outweighs them: a Cornell box of Beckmann plastic
         // walls ran at 1.15x the scalar tracer's time on the engine, the staircase interior
-        // (54% Lambertian) at 1.02x (docs/engine.md). Checked before the triangles are copied:
+        // (54% Lambertian) at 1.02x while its GGX plastics were shaded by the scalar code
+        // (docs/engine.md). Checked before the triangles are copied:
         // that took 51-57 ms on the staircase, on every renderer made (every worker batch).
         let (mut lanes, mut total) = (0.0f64, 0.0f64);
         for (_, prim) in scene.bvh.distinct() {
@@ -139,23 +144,35 @@ impl DiffuseScene {
             }
         }
         if lanes < 0.6 * total {
-            return no("most of the scene's surface is not Lambertian triangles");
+            return no("most of the scene's surface is not Lambertian or GGX-plastic triangles");
         }
         let mut tris = Vec::with_capacity(prims.len());
         let mut textures = Vec::new();
         let mut texture_of = std::collections::HashMap::new();
+        let mut plastics = Vec::new();
+        let mut plastic_of = std::collections::HashMap::new();
         for prim in prims {
             let shape = &scene.shapes[prim.shape() as usize];
             let Some((t, front, back)) = lane_shaded(scene, prim) else {
                 // Shaded by the scalar code; what it would find on its surface the lanes do
                 // not carry: emission (its MIS needs the previous bounce's point).
                 if shape.light.is_some() {
-                    return no("an emitter is not a Lambertian triangle");
+                    return no("an emitter is not a triangle the lanes shade");
                 }
                 tris.push(Tri::SCALAR);
                 continue;
             };
             let two_sided = back.is_some();
+            // One entry per material, whatever its triangles.
+            let mut plastic = |side: &LaneSide| match side.plastic {
+                None => NO_PLASTIC,
+                Some(p) => *plastic_of.entry(p as *const Plastic).or_insert_with(|| {
+                    plastics.push(LanePlastic::new(p).expect("lane_shaded checked it"));
+                    plastics.len() as u32 - 1
+                }),
+            };
+            let plastic = [plastic(&front), back.as_ref().map_or(NO_PLASTIC, &mut plastic)];
+            let (front, back) = (front.reflectance, back.map(|b| b.reflectance));
             let fixed = |p: &Param<Rgb>| match p {
                 Param::Fixed(r) => Some(r.to_array()),
                 Param::Textured(_) => None,
@@ -197,6 +214,7 @@ impl DiffuseScene {
                 reflectance,
                 back_reflectance,
                 two_sided,
+                plastic,
                 texture,
                 emission,
                 light_density,
@@ -206,29 +224,45 @@ impl DiffuseScene {
         Ok(DiffuseScene {
             tris,
             textures,
+            plastics,
             max_depth: settings.max_depth.unwrap_or(u32::MAX),
             rr_depth: settings.rr_depth,
         })
     }
 }
 
-/// A triangle the lanes shade, with its front's reflectance and, if two-sided, its back's.
-type LaneShaded<'s> = (&'s Triangle, &'s Param<Rgb>, Option<&'s Param<Rgb>>);
+/// A side of a material the lanes shade: Lambertian, or a rough plastic with this diffuse
+/// reflectance.
+struct LaneSide<'s> {
+    reflectance: &'s Param<Rgb>,
+    plastic: Option<&'s Plastic>,
+}
 
-/// The triangle and its (front, back) reflectances if the lanes shade `prim`: a triangle in a
-/// Lambertian material, or a two-sided one of two (whose back is shaded with its second BSDF,
-/// as the front); `None` for what the scalar code shades.
+/// A triangle the lanes shade, with its front and, if two-sided, its back.
+type LaneShaded<'s> = (&'s Triangle, LaneSide<'s>, Option<LaneSide<'s>>);
+
+/// The triangle and its (front, back) materials if the lanes shade `prim`: a triangle in a
+/// Lambertian material or a GGX rough plastic ([`LanePlastic::new`]), or a two-sided one of
+/// two (whose back is shaded with its second BSDF, as the front); `None` for what the scalar
+/// code shades.
 fn lane_shaded<'s>(scene: &'s Scene, prim: &'s Primitive) -> Option<LaneShaded<'s>> {
     let Primitive::Triangle(t) = prim else {
         return None;
     };
-    let diffuse = |b: &'s Bsdf| match b {
-        Bsdf::Diffuse(d) => Some(&d.reflectance),
+    let side = |b: &'s Bsdf| match b {
+        Bsdf::Diffuse(d) => Some(LaneSide {
+            reflectance: &d.reflectance,
+            plastic: None,
+        }),
+        Bsdf::Plastic(p) if LanePlastic::models(p) => Some(LaneSide {
+            reflectance: &p.diffuse,
+            plastic: Some(p),
+        }),
         _ => None,
     };
     match &scene.bsdfs[scene.shapes[prim.shape() as usize].bsdf as usize] {
-        Bsdf::TwoSided(pair) => Some((t, diffuse(&pair.0)?, Some(diffuse(&pair.1)?))),
-        b => Some((t, diffuse(b)?, None)),
+        Bsdf::TwoSided(pair) => Some((t, side(&pair.0)?, Some(side(&pair.1)?))),
+        b => Some((t, side(b)?, None)),
     }
 }
 
@@ -346,6 +380,7 @@ impl Row<'_> {
             } else {
                 intersect_one_by_one(scene, &mut paths);
             }
+            escape(scene, &paths, &mut out);
             for start in (0..paths.n).step_by(LANES) {
                 shade(ds, depth, start, &mut paths, &mut out, scene);
             }
@@ -392,6 +427,28 @@ fn intersect_one_by_one(scene: &Scene, paths: &mut Paths) {
         if let Some(h) = hit {
             (paths.t[i], paths.b[0][i], paths.b[1][i], paths.tri[i]) = (h.t, h.b1, h.b2, h.prim);
         }
+    }
+}
+
+/// What the paths that left the scene find of the environment, if there is one, weighted as
+/// `Walk::escaped` weights it (against light sampling after a bounce that was not specular).
+#[inline(always)]
+fn escape(scene: &Scene, paths: &Paths, out: &mut [Rgb]) {
+    if scene.environment.is_none() {
+        return;
+    }
+    for i in (0..paths.n).filter(|&i| !paths.alive[i]) {
+        let at = |v: &[Vec<f32>; 3]| glam::Vec3A::new(v[0][i], v[1][i], v[2][i]);
+        let Some((le, light_pdf)) = scene.environment_at(at(&paths.d)) else {
+            continue;
+        };
+        let prev = paths.prev_pdf[i];
+        let w = if prev == 0.0 {
+            1.0
+        } else {
+            crate::integrator::mis_weight(prev, light_pdf)
+        };
+        out[paths.pixel[i] as usize] += Rgb::from(at(&paths.beta)) * le * w;
     }
 }
 
@@ -585,6 +642,25 @@ fn away(p: F8, o: F8) -> F8 {
     F8(r.map(f32::from_bits))
 }
 
+/// The tangents of `Frame::from_normal(n)`: Duff et al.'s basis.
+#[inline(always)]
+fn frame(n: V8) -> (V8, V8) {
+    let sign = n.z.sign_one();
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let fs = V8 {
+        x: 1.0 + sign * n.x * n.x * a,
+        y: sign * b,
+        z: -sign * n.x,
+    };
+    let ft = V8 {
+        x: b,
+        y: sign + n.y * n.y * a,
+        z: -n.y,
+    };
+    (fs, ft)
+}
+
 /// The power heuristic (`integrator::mis_weight`) in lanes, for finite densities.
 #[inline(always)]
 fn mis(a: F8, b: F8) -> F8 {
@@ -635,6 +711,25 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let back = M8::from_fn(|i| ds.tris[idx[i] as usize].two_sided) & cos_o.lt(zero);
     let side = back.select(F8::splat(-1.0), F8::splat(1.0));
     let scatters = (side * cos_o).gt(zero);
+    // The shading frame (`Frame::from_normal`) and, where a lane's material is rough plastic,
+    // the plastic and the direction to the viewer in the frame (a back side's z flipped).
+    let (fs, ft) = frame(n);
+    let plastic_idx: [u32; LANES] = std::array::from_fn(|i| {
+        let t = &ds.tris[idx[i] as usize];
+        if live.get(i) && !t.scalar {
+            t.plastic[usize::from(back.get(i))]
+        } else {
+            NO_PLASTIC
+        }
+    });
+    let coats = Plastics::gather(&ds.plastics, plastic_idx);
+    let plastic = M8::from_fn(|i| plastic_idx[i] != NO_PLASTIC);
+    let to_viewer = d.scale(F8::splat(-1.0));
+    let wv = V8 {
+        x: to_viewer.dot(fs),
+        y: to_viewer.dot(ft),
+        z: side * cos_o,
+    };
 
     // Emission found by the camera ray, or by BSDF sampling weighted against light sampling.
     let le = gather3(&ds.tris, &idx, |t| t.emission);
@@ -669,17 +764,28 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     });
 
     // A light sample: the light and triangle picked in scalar code (binary searches), the
-    // point and its weight in lanes.
+    // point and its weight in lanes for area lights; other lights (the environment, points,
+    // spots, the sun) sampled by their scalar code, lane by lane.
     let mut light_tri = [0u32; LANES];
     let mut u_x = zero;
-    for (i, tri) in light_tri.iter_mut().enumerate() {
-        if live.get(i)
-            && let Some((li, _)) = scene.pick_light(u_sel.0[i])
-            && let Light::Area(a) = &scene.lights[li as usize]
-        {
-            let (k, _, ux) = a.area_distribution.sample(u_l0.0[i]);
-            *tri = a.prims[k];
-            u_x.0[i] = ux;
+    let mut area = M8::splat(false);
+    let mut other: [Option<LightSample>; LANES] = [None; LANES];
+    for i in 0..LANES {
+        let Some((li, pmf)) = live.get(i).then(|| scene.pick_light(u_sel.0[i])).flatten() else {
+            continue;
+        };
+        match &scene.lights[li as usize] {
+            Light::Area(a) => {
+                let (k, _, ux) = a.area_distribution.sample(u_l0.0[i]);
+                light_tri[i] = a.prims[k];
+                u_x.0[i] = ux;
+                area.set(i, true);
+            }
+            _ => {
+                let at = glam::Vec3A::from(p.lane(i));
+                let u = Vec2::new(u_l0.0[i], u_l1.0[i]);
+                other[i] = scene.sample_picked_light(li, pmf, at, u).map(|(_, ls)| ls);
+            }
         }
     }
     let root = (1.0 - u_x).sqrt();
@@ -687,34 +793,67 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let (lp, lerr) = surface(&ds.tris, &light_tri, lb1, lb2);
     let ln = gather3(&ds.tris, &light_tri, |t| t.ng);
     let lns = shading_normal(&ds.tris, &light_tri, lb1, lb2, ln);
-    let lrad = gather3(&ds.tris, &light_tri, |t| t.emission);
+    let mut lrad = gather3(&ds.tris, &light_tri, |t| t.emission);
     let ldensity = F8::from_fn(|i| ds.tris[light_tri[i] as usize].light_density);
     let to_light = lp - p;
     let dist2 = to_light.dot(to_light);
     let dist = dist2.sqrt();
-    let wi = to_light.scale(1.0 / dist);
+    let mut wi = to_light.scale(1.0 / dist);
     // The light emits from the front of its shading normal; its density follows the geometric one.
     let cos_l = ln.dot(wi).abs();
+    let mut pdf_l = dist2 * ldensity / cos_l;
+    let mut lit = area & dist2.gt(zero) & (-lns.dot(wi)).gt(zero);
+    let sampled = M8::from_fn(|i| other[i].is_some());
+    let delta = M8::from_fn(|i| other[i].is_some_and(|ls| ls.delta));
+    if sampled.any() {
+        let ls = |f: fn(&LightSample) -> [f32; 3]| {
+            let v: [[f32; 3]; LANES] = std::array::from_fn(|i| other[i].as_ref().map_or([0.0; 3], f));
+            V8 {
+                x: F8::from_fn(|i| v[i][0]),
+                y: F8::from_fn(|i| v[i][1]),
+                z: F8::from_fn(|i| v[i][2]),
+            }
+        };
+        wi = V8::select(sampled, ls(|l| l.wi.to_array()), wi);
+        lrad = V8::select(sampled, ls(|l| l.radiance.to_array()), lrad);
+        pdf_l = sampled.select(F8::from_fn(|i| other[i].map_or(0.0, |l| l.pdf)), pdf_l);
+        lit = lit | sampled;
+    }
     let cos_i = side * n.dot(wi);
-    let pdf_l = dist2 * ldensity / cos_l;
-    let lit = live
-        & scatters
-        & dist2.gt(zero)
-        & (-lns.dot(wi)).gt(zero)
-        & cos_i.gt(zero)
-        & pdf_l.gt(zero)
-        & pdf_l.lt(F8::splat(f32::INFINITY));
+    let lit = lit & live & scatters & cos_i.gt(zero) & pdf_l.gt(zero) & pdf_l.lt(F8::splat(f32::INFINITY));
+    // Point-like lights are not weighted against BSDF sampling, which cannot find them.
+    let weigh = |bsdf_pdf: F8| delta.select(F8::splat(1.0), mis(pdf_l, bsdf_pdf));
     let mut refl = V8::select(
         back,
         gather3(&ds.tris, &idx, |t| t.back_reflectance),
         gather3(&ds.tris, &idx, |t| t.reflectance),
     );
     textured_reflectance(scene, ds, &idx, live & scatters, back, b1, b2, &mut refl);
-    let f_over_pdf =
-        cos_i * std::f32::consts::FRAC_1_PI * mis(pdf_l, cos_i * std::f32::consts::FRAC_1_PI) / pdf_l;
-    let carry = (beta * refl * lrad).scale(f_over_pdf);
+    let f_over_pdf = cos_i * std::f32::consts::FRAC_1_PI * weigh(cos_i * std::f32::consts::FRAC_1_PI) / pdf_l;
+    let mut carry = (beta * refl * lrad).scale(f_over_pdf);
+    if let Some(c) = &coats {
+        // As `direct::light_sample`: f · cos from the BSDF, weighted against its density.
+        let wl = V8 {
+            x: wi.dot(fs),
+            y: wi.dot(ft),
+            z: cos_i,
+        };
+        let (f, pdf_b) = c.eval_pdf(refl, wv, wl);
+        let coated = beta * (f * lrad).scale(weigh(pdf_b) / pdf_l);
+        carry = V8::select(plastic, coated, carry);
+    }
     let so = offset(p, err, ng, wi);
-    let target = offset(lp, lerr, ln, so - lp);
+    let mut target = offset(lp, lerr, ln, so - lp);
+    for (i, ls) in other.iter().enumerate() {
+        let Some(ls) = ls else { continue };
+        // As `Scene::transmittance`: a point light's own point, else just off the light.
+        let t = if ls.n == glam::Vec3A::ZERO {
+            ls.p
+        } else {
+            crate::geometry::offset_ray_origin(ls.p, ls.p_err, ls.n, glam::Vec3A::from(so.lane(i)) - ls.p)
+        };
+        (target.x.0[i], target.y.0[i], target.z.0[i]) = (t.x, t.y, t.z);
+    }
     store3(&mut paths.shadow_o, start, so);
     store3(&mut paths.shadow_d, start, target - so);
     store3(
@@ -733,23 +872,17 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let (s, c) = sincos_quarter(angle);
     let (dx, dy) = (r * x_major.select(c, s), r * x_major.select(s, c));
     let dz = (1.0 - dx * dx - dy * dy).max(zero).sqrt();
-    let sign = n.z.sign_one();
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    let fs = V8 {
-        x: 1.0 + sign * n.x * n.x * a,
-        y: sign * b,
-        z: -sign * n.x,
-    };
-    let ft = V8 {
-        x: b,
-        y: sign + n.y * n.y * a,
-        z: -n.y,
-    };
-    let wo = fs.scale(dx) + ft.scale(dy) + n.scale(dz * side);
-    let pdf = dz * std::f32::consts::FRAC_1_PI;
+    let (mut local, mut pdf, mut weight) =
+        (V8 { x: dx, y: dy, z: dz }, dz * std::f32::consts::FRAC_1_PI, refl);
+    if let Some(c) = &coats {
+        let (wo, w, p) = c.sample(refl, wv, u_lobe, (u_b0, u_b1), local);
+        local = V8::select(plastic, wo, local);
+        pdf = plastic.select(p, pdf);
+        weight = V8::select(plastic, w, weight);
+    }
+    let wo = fs.scale(local.x) + ft.scale(local.y) + n.scale(local.z * side);
     live = live & scatters & pdf.gt(zero);
-    let beta = beta * refl;
+    let beta = beta * weight;
 
     // Roulette from the scalar tracer's depth on (its depth counts this bounce).
     let beta = if depth + 1 > ds.rr_depth {
@@ -933,17 +1066,77 @@ mod tests {
             );
             t.replacen("</scene>", &strip, 1)
         };
+        // cbox in GGX rough plastics: the white one glossy and nonlinear, the red wall's
+        // textured with a dimmer coating, the green wall turned round, diffuse in front and
+        // plastic behind; the light stays Lambertian.
+        let plastics = |t: String| {
+            let coat = |alpha: &str, extra: &str| {
+                format!(
+                    "<bsdf type=\"roughplastic\"><string name=\"distribution\" value=\"ggx\"/>\
+                     <float name=\"alpha\" value=\"{alpha}\"/>{extra}</bsdf>"
+                )
+            };
+            let t = t.replacen(
+                "<bsdf type=\"diffuse\" id=\"white\">\n        <rgb name=\"reflectance\"",
+                "<bsdf type=\"roughplastic\" id=\"white\"><string name=\"distribution\" value=\"ggx\"/>\
+                 <float name=\"alpha\" value=\"0.1\"/><boolean name=\"nonlinear\" value=\"true\"/>\
+                 <rgb name=\"diffuse_reflectance\"",
+                1,
+            );
+            let t = t.replacen(
+                "<bsdf type=\"diffuse\" id=\"red\">\n        <rgb name=\"reflectance\" value=\"0.570068, 0.0430135, 0.0443706\"/>\n    </bsdf>",
+                &format!(
+                    "<bsdf type=\"twosided\" id=\"red\">{}</bsdf>",
+                    coat(
+                        "0.3",
+                        "<rgb name=\"specular_reflectance\" value=\"0.5\"/><texture type=\"bitmap\" \
+                         name=\"diffuse_reflectance\"><string name=\"filename\" value=\"textures/colors.png\"/></texture>"
+                    )
+                ),
+                1,
+            );
+            let back = coat("0.05", "<float name=\"int_ior\" value=\"1.33\"/>");
+            let t = t
+                .replacen(
+                    "<bsdf type=\"diffuse\" id=\"green\">",
+                    "<bsdf type=\"twosided\" id=\"green\"><bsdf type=\"diffuse\">",
+                    1,
+                )
+                .replacen(
+                    "</bsdf>\n    <bsdf type=\"twosided\" id=\"red\">",
+                    &format!("</bsdf>{back}</bsdf>\n    <bsdf type=\"twosided\" id=\"red\">"),
+                    1,
+                )
+                .replacen(
+                    "<ref id=\"green\"/>",
+                    "<ref id=\"green\"/><boolean name=\"flip_normals\" value=\"true\"/>",
+                    1,
+                );
+            let light = t.find("id=\"light\"").unwrap();
+            let at = light + t[light..].find("<ref id=\"white\"/>").unwrap();
+            let mut t = t;
+            t.replace_range(at..at + "<ref id=\"white\"/>".len(), "<bsdf type=\"diffuse\"/>");
+            t
+        };
         let same = |t: String| t;
         // Each sample splatted over the pixels its filter reaches.
         let tent = |t: String| t.replacen("<rfilter type=\"box\"/>", "<rfilter type=\"tent\"/>", 1);
         let gaussian = |t: String| t.replacen("<rfilter type=\"box\"/>", "<rfilter type=\"gaussian\"/>", 1);
-        let scenes: [(&str, &dyn Fn(String) -> String); 7] = [
+        let scenes: [(&str, &dyn Fn(String) -> String); 12] = [
             ("cbox.xml", &same),
             ("cbox.xml", &tent),
             ("meshes.xml", &gaussian),
             ("meshes.xml", &same),
             ("cbox.xml", &two_sided_back),
             ("cbox.xml", &textured),
+            ("cbox.xml", &plastics),
+            // Lights other than area lights, sampled by their scalar code lane by lane: an
+            // environment map (seen through glass), a point, a spot and an area light, a
+            // constant environment with the sun, a projector.
+            ("environment.xml", &same),
+            ("lights.xml", &same),
+            ("sun.xml", &same),
+            ("projector.xml", &same),
             // A glass sphere and a mirror one, shaded by the scalar code lane by lane.
             ("cbox-spheres.xml", &same),
         ];
@@ -961,9 +1154,11 @@ mod tests {
                 None => text,
             };
             let scene = Scene::from_str(&text, &path, &[("res".to_string(), res.to_string())]).unwrap();
-            assert!(scene.bvh.primitives().len() > 36 || name.starts_with("cbox"));
+            assert!(scene.bvh.primitives().len() > 36 || name != "meshes.xml");
+            let ds = DiffuseScene::new(&scene, &PathSettings::from_scene(&scene)).unwrap();
+            assert_eq!(ds.plastics.is_empty(), !text.contains("roughplastic"), "{name}");
             let splats = ["tent", "gaussian"].map(|f| text.contains(&format!("<rfilter type=\"{f}\"/>")));
-            assert_eq!(scene.filter.is_box(), splats == [false; 2], "{name}");
+            assert!(splats == [false; 2] || !scene.filter.is_box(), "{name}");
             let settings = RenderSettings {
                 seed: 7,
                 method: Method::Path(PathSettings::from_scene(&scene)),
@@ -998,8 +1193,9 @@ mod tests {
             .expect("media are refused")
             .to_string();
         assert!(e.contains("media"), "{e}");
-        // cbox with its walls in rough plastic, the light Lambertian: the scalar code would
-        // shade nearly every bounce, so the scalar tracer renders it.
+        // cbox with its walls in rough plastic (Beckmann, Mitsuba's default, which the lanes
+        // do not model), the light Lambertian: the scalar code would shade nearly every
+        // bounce, so the scalar tracer renders it.
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/cbox.xml");
         let mut text = std::fs::read_to_string(&path).unwrap();
         for c in ["white", "green", "red"] {
