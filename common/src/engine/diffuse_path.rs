@@ -431,24 +431,29 @@ fn intersect_one_by_one(scene: &Scene, paths: &mut Paths) {
 }
 
 /// What the paths that left the scene find of the environment, if there is one, weighted as
-/// `Walk::escaped` weights it (against light sampling after a bounce that was not specular).
+/// `Walk::escaped` weights it (against light sampling after a bounce that was not specular):
+/// eight paths' lookups at once, so that their cache misses overlap
+/// (`Scene::environment_at_each`).
 #[inline(always)]
 fn escape(scene: &Scene, paths: &Paths, out: &mut [Rgb]) {
     if scene.environment.is_none() {
         return;
     }
-    for i in (0..paths.n).filter(|&i| !paths.alive[i]) {
-        let at = |v: &[Vec<f32>; 3]| glam::Vec3A::new(v[0][i], v[1][i], v[2][i]);
-        let Some((le, light_pdf)) = scene.environment_at(at(&paths.d)) else {
-            continue;
-        };
-        let prev = paths.prev_pdf[i];
-        let w = if prev == 0.0 {
-            1.0
-        } else {
-            crate::integrator::mis_weight(prev, light_pdf)
-        };
-        out[paths.pixel[i] as usize] += Rgb::from(at(&paths.beta)) * le * w;
+    let at = |v: &[Vec<f32>; 3], i: usize| glam::Vec3A::new(v[0][i], v[1][i], v[2][i]);
+    let gone: Vec<usize> = (0..paths.n).filter(|&i| !paths.alive[i]).collect();
+    for group in gone.chunks(LANES) {
+        let d = std::array::from_fn(|l| group.get(l).map(|&i| at(&paths.d, i)));
+        let found: [_; LANES] = scene.environment_at_each(d);
+        for (&i, found) in group.iter().zip(found) {
+            let Some((le, light_pdf)) = found else { continue };
+            let prev = paths.prev_pdf[i];
+            let w = if prev == 0.0 {
+                1.0
+            } else {
+                crate::integrator::mis_weight(prev, light_pdf)
+            };
+            out[paths.pixel[i] as usize] += Rgb::from(at(&paths.beta, i)) * le * w;
+        }
     }
 }
 
@@ -765,11 +770,12 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
 
     // A light sample: the light and triangle picked in scalar code (binary searches), the
     // point and its weight in lanes for area lights; other lights (the environment, points,
-    // spots, the sun) sampled by their scalar code, lane by lane.
+    // spots, the sun) sampled by their scalar code, the lanes that picked one light together
+    // (an environment map's samples then overlap their cache misses).
     let mut light_tri = [0u32; LANES];
     let mut u_x = zero;
     let mut area = M8::splat(false);
-    let mut other: [Option<LightSample>; LANES] = [None; LANES];
+    let mut picked = [None; LANES];
     for i in 0..LANES {
         let Some((li, pmf)) = live.get(i).then(|| scene.pick_light(u_sel.0[i])).flatten() else {
             continue;
@@ -781,11 +787,18 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
                 u_x.0[i] = ux;
                 area.set(i, true);
             }
-            _ => {
-                let at = glam::Vec3A::from(p.lane(i));
-                let u = Vec2::new(u_l0.0[i], u_l1.0[i]);
-                other[i] = scene.sample_picked_light(li, pmf, at, u).map(|(_, ls)| ls);
-            }
+            _ => picked[i] = Some((li, pmf)),
+        }
+    }
+    let mut other: [Option<LightSample>; LANES] = [None; LANES];
+    let at: [glam::Vec3A; LANES] = std::array::from_fn(|i| glam::Vec3A::from(p.lane(i)));
+    let mut left = picked;
+    while let Some((li, pmf)) = left.iter().find_map(|&x| x) {
+        let mine = left.map(|x| x.is_some_and(|(l, _)| l == li));
+        let u = std::array::from_fn(|i| mine[i].then(|| Vec2::new(u_l0.0[i], u_l1.0[i])));
+        let got = scene.sample_picked_light_each(li, pmf, at, u);
+        for i in (0..LANES).filter(|&i| mine[i]) {
+            (other[i], left[i]) = (got[i], None);
         }
     }
     let root = (1.0 - u_x).sqrt();

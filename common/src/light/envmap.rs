@@ -96,27 +96,53 @@ impl EnvmapLight {
 
     /// Radiance arriving from world direction `wi` (pointing away from the scene).
     pub fn eval(&self, wi: Vec3A) -> Rgb {
-        let uv = direction_to_uv((self.to_local * wi).normalize_or_zero());
-        // Mitsuba's lookup: texel-centred and periodic in u, "align corners" in v (row 0 is
-        // exactly the pole).
-        let x = uv.x * self.width as f32 - 0.5;
-        let y = uv.y * (self.height - 1) as f32;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = self.texel(x0, y0) * (1.0 - fx) + self.texel(x0 + 1, y0) * fx;
-        let bottom = self.texel(x0, y0 + 1) * (1.0 - fx) + self.texel(x0 + 1, y0 + 1) * fx;
-        top * (1.0 - fy) + bottom * fy
+        self.eval_each([Some(wi)])[0]
+    }
+
+    /// Where world direction `wi` falls: its local direction and its (u, v) in the map.
+    fn place(&self, wi: Vec3A) -> (Vec3A, Vec2) {
+        let d = (self.to_local * wi).normalize_or_zero();
+        (d, direction_to_uv(d))
+    }
+
+    /// [`EnvmapLight::eval`] of each direction given (black for none).
+    fn eval_each<const N: usize>(&self, wi: [Option<Vec3A>; N]) -> [Rgb; N] {
+        self.lookup_each(wi.map(|wi| wi.map(|wi| self.place(wi).1)))
+    }
+
+    /// The radiance at each (u, v) given (black for none), every lookup's place found before
+    /// any texel is read, so that the texels' cache misses overlap.
+    fn lookup_each<const N: usize>(&self, uv: [Option<Vec2>; N]) -> [Rgb; N] {
+        let at = uv.map(|uv| {
+            uv.map(|uv| {
+                // Mitsuba's lookup: texel-centred and periodic in u, "align corners" in v
+                // (row 0 is exactly the pole).
+                let x = uv.x * self.width as f32 - 0.5;
+                let y = uv.y * (self.height - 1) as f32;
+                let (x0, y0) = (x.floor(), y.floor());
+                (x0 as i64, y0 as i64, x - x0, y - y0)
+            })
+        });
+        at.map(|at| {
+            at.map_or(Rgb::ZERO, |(x0, y0, fx, fy)| {
+                let top = self.texel(x0, y0) * (1.0 - fx) + self.texel(x0 + 1, y0) * fx;
+                let bottom = self.texel(x0, y0 + 1) * (1.0 - fx) + self.texel(x0 + 1, y0 + 1) * fx;
+                top * (1.0 - fy) + bottom * fy
+            })
+        })
     }
 
     /// Density per unit solid angle of sampling world direction `wi`.
     pub fn pdf(&self, wi: Vec3A) -> f32 {
-        let d = (self.to_local * wi).normalize_or_zero();
+        self.pdf_at(self.place(wi))
+    }
+
+    /// [`EnvmapLight::pdf`] of a direction's [`EnvmapLight::place`].
+    fn pdf_at(&self, (d, uv): (Vec3A, Vec2)) -> f32 {
         let sin = (d.x * d.x + d.z * d.z).sqrt();
         if sin <= 0.0 || self.rows.is_empty() {
             return 0.0;
         }
-        let uv = direction_to_uv(d);
         let x = (uv.x * self.width as f32 - 0.5).rem_euclid(self.width as f32);
         let y = uv.y * (self.height - 1) as f32;
         let i = (x as usize).min(self.width - 1);
@@ -125,32 +151,74 @@ impl EnvmapLight {
         pdf_uv / (2.0 * PI * PI * sin)
     }
 
+    /// [`EnvmapLight::eval`] and [`EnvmapLight::pdf`] of each direction given (zeros for
+    /// none): each direction placed once for both, and every table read after every place is
+    /// found, so that the cache misses overlap.
+    pub(super) fn eval_pdf_each<const N: usize>(&self, wi: [Option<Vec3A>; N]) -> [(Rgb, f32); N] {
+        let places = wi.map(|wi| wi.map(|wi| self.place(wi)));
+        let radiance = self.lookup_each(places.map(|p| p.map(|(_, uv)| uv)));
+        let pdf = places.map(|p| p.map_or(0.0, |p| self.pdf_at(p)));
+        std::array::from_fn(|l| (radiance[l], pdf[l]))
+    }
+
     /// A direction towards the map, its radiance and its density per unit solid angle.
     fn sample(&self, u: Vec2) -> Option<(Vec3A, Rgb, f32)> {
+        self.sample_each([Some(u)])[0]
+    }
+
+    /// [`EnvmapLight::sample`] of each `u` given, step by step over all of them: the row
+    /// and the column of every sample ([`Distribution1D::sample_each`]), then every
+    /// direction, then every radiance ([`EnvmapLight::eval_each`]). Each step's cache misses
+    /// then overlap; one sample after the other, each waits for its chain of three.
+    fn sample_each<const N: usize>(&self, u: [Option<Vec2>; N]) -> [Option<(Vec3A, Rgb, f32)>; N] {
         if self.rows.is_empty() {
-            return None;
+            return [None; N];
         }
-        let (j, pj, uy) = self.rows.sample(u.y);
-        let (i, pi, ux) = self.cols[j].sample(u.x);
-        let x = i as f32 + ux;
-        let y = j as f32 + uy;
-        let uv = Vec2::new(
-            ((x + 0.5) / self.width as f32).fract(),
-            y / (self.height - 1) as f32,
-        );
-        let sin = libm::sinf(PI * uv.y);
-        if sin <= 0.0 {
-            return None;
-        }
-        let pdf = pj * pi * (self.width * (self.height - 1)) as f32 / (2.0 * PI * PI * sin);
-        let wi = (self.to_world * uv_to_direction(uv)).normalize();
-        let radiance = self.eval(wi);
-        (pdf > 0.0).then_some((wi, radiance, pdf))
+        let at = u.map(|u| u.unwrap_or(Vec2::ZERO));
+        let rows = Distribution1D::sample_each([&self.rows; N], at.map(|u| u.y));
+        let cols =
+            Distribution1D::sample_each(std::array::from_fn(|l| &self.cols[rows[l].0]), at.map(|u| u.x));
+        let dirs: [Option<(Vec3A, f32)>; N] = std::array::from_fn(|l| {
+            u[l]?;
+            let ((j, pj, uy), (i, pi, ux)) = (rows[l], cols[l]);
+            let x = i as f32 + ux;
+            let y = j as f32 + uy;
+            let uv = Vec2::new(
+                ((x + 0.5) / self.width as f32).fract(),
+                y / (self.height - 1) as f32,
+            );
+            let sin = libm::sinf(PI * uv.y);
+            if sin <= 0.0 {
+                return None;
+            }
+            let pdf = pj * pi * (self.width * (self.height - 1)) as f32 / (2.0 * PI * PI * sin);
+            Some(((self.to_world * uv_to_direction(uv)).normalize(), pdf))
+        });
+        let radiance = self.eval_each(dirs.map(|d| d.map(|(wi, _)| wi)));
+        std::array::from_fn(|l| {
+            let (wi, pdf) = dirs[l]?;
+            (pdf > 0.0).then_some((wi, radiance[l], pdf))
+        })
+    }
+
+    /// Light samples from each point `p[l]` with `u[l]`, where given: [`Light::sample_li`]'s,
+    /// several at once ([`EnvmapLight::sample_each`]).
+    ///
+    /// [`Light::sample_li`]: super::Light::sample_li
+    pub(super) fn sample_li_each<const N: usize>(
+        &self,
+        p: [Vec3A; N],
+        u: [Option<Vec2>; N],
+    ) -> [Option<LightSample>; N] {
+        let s = self.sample_each(u);
+        std::array::from_fn(|l| {
+            let (wi, radiance, pdf) = s[l]?;
+            Some(self.sphere.sample_towards(p[l], wi, radiance, pdf, false))
+        })
     }
 
     pub(super) fn sample_li(&self, p: Vec3A, u: Vec2) -> Option<LightSample> {
-        let (wi, radiance, pdf) = self.sample(u)?;
-        Some(self.sphere.sample_towards(p, wi, radiance, pdf, false))
+        self.sample_li_each([p], [Some(u)])[0]
     }
 
     pub(super) fn sample_emission(&self, u_pos: Vec2, u_dir: Vec2) -> Option<EmittedPhoton> {

@@ -122,6 +122,21 @@ impl Light {
         }
     }
 
+    /// [`Light::sample_li`] from each point `p[l]` with `u[l]`, where given. An environment
+    /// map takes them step by step over all the points, so that their cache misses overlap
+    /// (`EnvmapLight::sample_each`); other lights one after the other. The same answers.
+    pub fn sample_li_each<const N: usize>(
+        &self,
+        p: [Vec3A; N],
+        prims: &[crate::geometry::Primitive],
+        u: [Option<glam::Vec2>; N],
+    ) -> [Option<LightSample>; N] {
+        match self {
+            Light::Envmap(l) => l.sample_li_each(p, u),
+            _ => std::array::from_fn(|i| self.sample_li(p[i], prims, u[i]?)),
+        }
+    }
+
     /// Samples a photon: a position on the light and a direction of flight.
     pub fn sample_emission(
         &self,
@@ -172,6 +187,19 @@ impl Light {
             Light::Constant(_) => 1.0 / (4.0 * std::f32::consts::PI),
             Light::Envmap(l) => l.pdf(d),
             _ => 0.0,
+        }
+    }
+
+    /// [`Light::environment_radiance`] and [`Light::environment_pdf`] of each direction
+    /// given (zeros for none), an environment map's several at once (`eval_pdf_each`).
+    pub fn environment_each<const N: usize>(&self, d: [Option<Vec3A>; N]) -> [(Rgb, f32); N] {
+        match self {
+            Light::Envmap(l) => l.eval_pdf_each(d),
+            _ => d.map(|d| {
+                d.map_or((Rgb::ZERO, 0.0), |d| {
+                    (self.environment_radiance(d), self.environment_pdf(d))
+                })
+            }),
         }
     }
 

@@ -304,13 +304,44 @@ impl Scene {
         Some((i, ls))
     }
 
+    /// [`Scene::sample_picked_light`] from each point `p[l]` with `u[l]`, where given, several
+    /// at once ([`Light::sample_li_each`]).
+    pub fn sample_picked_light_each<const N: usize>(
+        &self,
+        i: u32,
+        pmf: f32,
+        p: [Vec3A; N],
+        u: [Option<glam::Vec2>; N],
+    ) -> [Option<LightSample>; N] {
+        self.lights[i as usize]
+            .sample_li_each(p, self.bvh.primitives(), u)
+            .map(|ls| {
+                ls.map(|mut ls| {
+                    ls.pdf *= pmf;
+                    ls
+                })
+            })
+    }
+
     /// Radiance that a ray leaving the scene along `d` finds, and the density with which
     /// [`Scene::sample_light`] would have chosen that direction.
     pub fn environment_at(&self, d: Vec3A) -> Option<(crate::color::Rgb, f32)> {
-        let i = self.environment?;
-        let light = &self.lights[i as usize];
-        let le = light.environment_radiance(d);
-        Some((le, self.light_sampling.pmf(i as usize) * light.environment_pdf(d)))
+        self.environment_at_each([Some(d)])[0]
+    }
+
+    /// [`Scene::environment_at`] of each direction given, several at once
+    /// ([`Light::environment_each`]); none where no direction is given or there is no
+    /// environment.
+    pub fn environment_at_each<const N: usize>(
+        &self,
+        d: [Option<Vec3A>; N],
+    ) -> [Option<(crate::color::Rgb, f32)>; N] {
+        let Some(i) = self.environment else {
+            return [None; N];
+        };
+        let pmf = self.light_sampling.pmf(i as usize);
+        let found = self.lights[i as usize].environment_each(d);
+        std::array::from_fn(|l| d[l].map(|_| (found[l].0, pmf * found[l].1)))
     }
 
     /// Whether a camera ray can see a light (an area light or an environment): points, spots,
