@@ -79,8 +79,8 @@ struct Tri {
     /// unit area of a point on it (zero if it does not emit).
     light_density: f32,
     /// Whether its bounces are shaded by the scalar path tracer's code, lane by lane
-    /// ([`shade_scalar`]): an analytic shape, or a material other than Lambertian. Then only
-    /// this field is meaningful.
+    /// ([`shade_scalar`]): an analytic shape, or a material the lanes do not model. Then only
+    /// this field is meaningful, and `plastic`, which names none.
     scalar: bool,
 }
 
@@ -440,12 +440,15 @@ fn escape(scene: &Scene, paths: &Paths, out: &mut [Rgb]) {
         return;
     }
     let at = |v: &[Vec<f32>; 3], i: usize| glam::Vec3A::new(v[0][i], v[1][i], v[2][i]);
-    let gone: Vec<usize> = (0..paths.n).filter(|&i| !paths.alive[i]).collect();
-    for group in gone.chunks(LANES) {
-        let d = std::array::from_fn(|l| group.get(l).map(|&i| at(&paths.d, i)));
-        let found: [_; LANES] = scene.environment_at_each(d);
-        for (&i, found) in group.iter().zip(found) {
-            let Some((le, light_pdf)) = found else { continue };
+    let mut gone = (0..paths.n).filter(|&i| !paths.alive[i]).peekable();
+    while gone.peek().is_some() {
+        let group: [Option<usize>; LANES] = std::array::from_fn(|_| gone.next());
+        let d = group.map(|i| i.map(|i| at(&paths.d, i)));
+        let found = scene.environment_at_each(d);
+        for (i, found) in group.into_iter().zip(found) {
+            let (Some(i), Some((le, light_pdf))) = (i, found) else {
+                continue;
+            };
             let prev = paths.prev_pdf[i];
             let w = if prev == 0.0 {
                 1.0
@@ -528,12 +531,7 @@ fn store3(v: &mut [Vec<f32>; 3], start: usize, x: V8) {
 /// A per-triangle field of each lane's triangle.
 #[inline(always)]
 fn gather3(tris: &[Tri], idx: &[u32; LANES], f: impl Fn(&Tri) -> [f32; 3]) -> V8 {
-    let v: [[f32; 3]; LANES] = std::array::from_fn(|i| f(&tris[idx[i] as usize]));
-    V8 {
-        x: F8::from_fn(|i| v[i][0]),
-        y: F8::from_fn(|i| v[i][1]),
-        z: F8::from_fn(|i| v[i][2]),
-    }
+    V8::from_fn(|i| f(&tris[idx[i] as usize]))
 }
 
 /// A point at barycentric coordinates (b1, b2) of each lane's triangle, with its rounding
@@ -720,9 +718,9 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     // the plastic and the direction to the viewer in the frame (a back side's z flipped).
     let (fs, ft) = frame(n);
     let plastic_idx: [u32; LANES] = std::array::from_fn(|i| {
-        let t = &ds.tris[idx[i] as usize];
-        if live.get(i) && !t.scalar {
-            t.plastic[usize::from(back.get(i))]
+        // A primitive the scalar code shades names no plastic (`Tri::SCALAR`).
+        if live.get(i) {
+            ds.tris[idx[i] as usize].plastic[usize::from(back.get(i))]
         } else {
             NO_PLASTIC
         }
@@ -819,14 +817,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
     let sampled = M8::from_fn(|i| other[i].is_some());
     let delta = M8::from_fn(|i| other[i].is_some_and(|ls| ls.delta));
     if sampled.any() {
-        let ls = |f: fn(&LightSample) -> [f32; 3]| {
-            let v: [[f32; 3]; LANES] = std::array::from_fn(|i| other[i].as_ref().map_or([0.0; 3], f));
-            V8 {
-                x: F8::from_fn(|i| v[i][0]),
-                y: F8::from_fn(|i| v[i][1]),
-                z: F8::from_fn(|i| v[i][2]),
-            }
-        };
+        let ls = |f: fn(&LightSample) -> [f32; 3]| V8::from_fn(|i| other[i].as_ref().map_or([0.0; 3], f));
         wi = V8::select(sampled, ls(|l| l.wi.to_array()), wi);
         lrad = V8::select(sampled, ls(|l| l.radiance.to_array()), lrad);
         pdf_l = sampled.select(F8::from_fn(|i| other[i].map_or(0.0, |l| l.pdf)), pdf_l);
@@ -994,6 +985,14 @@ mod tests {
         load("cbox.xml", res)
     }
 
+    /// cbox's text with its light's material (the white walls') made Lambertian.
+    fn lambertian_light(mut t: String) -> String {
+        let light = t.find("id=\"light\"").unwrap();
+        let at = light + t[light..].find("<ref id=\"white\"/>").unwrap();
+        t.replace_range(at..at + "<ref id=\"white\"/>".len(), "<bsdf type=\"diffuse\"/>");
+        t
+    }
+
     fn lanes(scene: &Scene, backend: Backend, passes: std::ops::Range<u64>) -> FilmSum {
         let ds = DiffuseScene::new(scene, &PathSettings::from_scene(scene)).unwrap();
         let mut film = FilmSum::new(scene.width(), scene.height());
@@ -1125,11 +1124,7 @@ mod tests {
                     "<ref id=\"green\"/><boolean name=\"flip_normals\" value=\"true\"/>",
                     1,
                 );
-            let light = t.find("id=\"light\"").unwrap();
-            let at = light + t[light..].find("<ref id=\"white\"/>").unwrap();
-            let mut t = t;
-            t.replace_range(at..at + "<ref id=\"white\"/>".len(), "<bsdf type=\"diffuse\"/>");
-            t
+            lambertian_light(t)
         };
         let same = |t: String| t;
         // Each sample splatted over the pixels its filter reaches.
@@ -1220,9 +1215,7 @@ mod tests {
                 1,
             );
         }
-        let light = text.find("id=\"light\"").unwrap();
-        let at = light + text[light..].find("<ref id=\"white\"/>").unwrap();
-        text.replace_range(at..at + "<ref id=\"white\"/>".len(), "<bsdf type=\"diffuse\"/>");
+        let text = lambertian_light(text);
         let scene = Scene::from_str(&text, &path, &[("res".to_string(), "16".to_string())]).unwrap();
         assert!(
             matches!(&scene.bsdfs[0], Bsdf::Plastic(_)),

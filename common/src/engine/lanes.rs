@@ -265,6 +265,17 @@ pub struct V8 {
 }
 
 impl V8 {
+    /// Lane `i` is `f(i)`.
+    #[inline(always)]
+    pub fn from_fn(mut f: impl FnMut(usize) -> [f32; 3]) -> V8 {
+        let v: [[f32; 3]; LANES] = std::array::from_fn(&mut f);
+        V8 {
+            x: F8::from_fn(|i| v[i][0]),
+            y: F8::from_fn(|i| v[i][1]),
+            z: F8::from_fn(|i| v[i][2]),
+        }
+    }
+
     /// One point in every lane.
     #[inline(always)]
     pub fn splat(v: [f32; 3]) -> V8 {

@@ -86,11 +86,7 @@ impl<'a> Plastics<'a> {
             internal_reflectance: f(|p| p.internal_reflectance),
             nonlinear: M8::from_fn(|i| p[i].nonlinear),
             specular_weight: f(|p| p.specular_weight),
-            specular: V8 {
-                x: f(|p| p.specular[0]),
-                y: f(|p| p.specular[1]),
-                z: f(|p| p.specular[2]),
-            },
+            specular: V8::from_fn(|i| p[i].specular),
             tables: std::array::from_fn(|i| &*p[i].table),
         })
     }
