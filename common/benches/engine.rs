@@ -13,8 +13,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use photonfarm::engine::Backend;
-use photonfarm::engine::diffuse_path::{DiffuseScene, render_pass};
 use photonfarm::engine::lanes::{F8, LANES, M8, V8};
+use photonfarm::engine::path::{LaneScene, render_pass};
 use photonfarm::film::FilmSum;
 use photonfarm::geometry::{Ray, Rays8};
 use photonfarm::integrator::path::PathSettings;
@@ -137,13 +137,13 @@ fn traversal(scene: &Scene, backends: &[Backend]) {
 /// The prototype against the scalar path tracer on `scene`, then the traversal table.
 fn race(name: &str, scene: &Scene, backends: &[Backend]) {
     let path = PathSettings::from_scene(scene);
-    let ds = DiffuseScene::new(scene, &path).unwrap();
+    let ds = LaneScene::new(scene, &path).unwrap();
     // What a worker paid per pass before `Renderer` made the lane scene once per batch.
     let build = median(
         (0..RUNS)
             .map(|_| {
                 let t = Instant::now();
-                std::hint::black_box(DiffuseScene::new(scene, &path).unwrap());
+                std::hint::black_box(LaneScene::new(scene, &path).unwrap());
                 t.elapsed().as_secs_f64() * 1e3
             })
             .collect(),

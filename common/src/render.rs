@@ -12,8 +12,8 @@ use glam::{Vec2, Vec3A};
 
 use crate::color::Rgb;
 use crate::engine::Backend;
-use crate::engine::diffuse_path::{self, DiffuseScene};
 use crate::engine::lanes::LANES;
+use crate::engine::path::LaneScene;
 use crate::features::{self, Features};
 use crate::film::{FilmSum, add_fixed, to_fixed};
 use crate::geometry::Ray;
@@ -88,8 +88,8 @@ pub struct Renderer<'s> {
     settings: RenderSettings,
     /// The lane engine's backend and scene, where the engine models the scene for the method
     /// (so far the path tracer on Lambertian triangles lit by area lights:
-    /// `engine::diffuse_path`).
-    lanes: Option<(Backend, DiffuseScene)>,
+    /// `engine::path`).
+    lanes: Option<(Backend, LaneScene)>,
     sppm: SppmBuffers,
     /// An odd pass's own sum, for [`Batch::odd`].
     part: FilmSum,
@@ -131,7 +131,7 @@ impl<'s> Renderer<'s> {
     pub fn on(scene: &'s Scene, settings: &RenderSettings, lanes: Option<Backend>) -> Renderer<'s> {
         let lanes = match (&settings.method, lanes) {
             // The lane engine's scene is made only when the lanes are asked for.
-            (Method::Path(p), Some(b)) => DiffuseScene::new(scene, p).ok().map(|ds| (b, ds)),
+            (Method::Path(p), Some(b)) => LaneScene::new(scene, p).ok().map(|ds| (b, ds)),
             _ => None,
         };
         Renderer {
@@ -230,7 +230,9 @@ impl<'s> Renderer<'s> {
                 None => add_pixel_samples(scene, film, seed, pass, |ray, sampler| {
                     path::radiance(scene, p, Share::All, ray, sampler)
                 }),
-                Some((backend, ds)) => diffuse_path::render_pass(scene, ds, seed, pass, *backend, film),
+                Some((backend, ds)) => {
+                    crate::engine::path::render_pass(scene, ds, seed, pass, *backend, film)
+                }
             },
             Method::Direct(d) => add_pixel_samples(scene, film, seed, pass, |ray, sampler| {
                 direct_illumination::radiance(scene, d, ray, sampler)

@@ -88,7 +88,7 @@ fn every_simd_backend_gives_the_same_bytes() {
     // The scene must be one the lane engine models, or this would test the scalar tracer.
     let loaded = photonfarm::scene::Scene::load(&scene, &[]).unwrap();
     let path = photonfarm::integrator::path::PathSettings::from_scene(&loaded);
-    assert!(photonfarm::engine::diffuse_path::DiffuseScene::new(&loaded, &path).is_ok());
+    assert!(photonfarm::engine::path::LaneScene::new(&loaded, &path).is_ok());
     let available = photonfarm::engine::Backend::available();
     let mut first: Option<Vec<u8>> = None;
     for b in &available {

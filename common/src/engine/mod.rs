@@ -1,15 +1,15 @@
 //! The lane engine (issue 27; design in docs/engine.md): paths traced eight at a time, one per
 //! lane, in arithmetic that gives the same bits on every instruction set.
 //!
-//! [`diffuse_path`] path-traces scenes made mostly of Lambertian and GGX rough plastic
+//! [`path`] path-traces scenes made mostly of Lambertian and GGX rough plastic
 //! triangles ([`plastic`]), under any lights, on the lane types ([`lanes`]) and our own
 //! transcendentals ([`math`]); the design's speed is measured by `cargo bench -p
 //! photonfarm-common --bench engine`. The path tracer hands it the scenes it models
 //! (`render::Renderer`).
 
-pub mod diffuse_path;
 pub mod lanes;
 pub mod math;
+pub mod path;
 mod plastic;
 
 use std::fmt;

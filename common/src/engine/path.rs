@@ -21,7 +21,7 @@
 //! and a mirror sphere runs on the engine, its walls in lanes.
 //!
 //! What it leaves out, on purpose: media, null surfaces, instances and emitters that are not
-//! triangles it shades. [`DiffuseScene::new`] refuses such scenes, and those
+//! triangles it shades. [`LaneScene::new`] refuses such scenes, and those
 //! that are mostly other surfaces, which the scalar integrators render.
 
 use pulp::WithSimd;
@@ -67,10 +67,10 @@ struct Tri {
     back_reflectance: [f32; 3],
     /// Whether the back scatters too (Mitsuba's `twosided`).
     two_sided: bool,
-    /// The (front, back) material's index in [`DiffuseScene::plastics`] if it is a rough
+    /// The (front, back) material's index in [`LaneScene::plastics`] if it is a rough
     /// plastic ([`NO_PLASTIC`] if Lambertian); its diffuse reflectance is `reflectance`'s.
     plastic: [u32; 2],
-    /// Its (front, back) reflectances in [`DiffuseScene::textures`] if either is textured
+    /// Its (front, back) reflectances in [`LaneScene::textures`] if either is textured
     /// (then `reflectance` and `back_reflectance` are unused), else [`NO_TEXTURE`].
     texture: u32,
     /// Radiance from its front, if it emits.
@@ -106,8 +106,9 @@ impl Tri {
     };
 }
 
-/// What the prototype needs of a scene, checked once.
-pub struct DiffuseScene {
+/// A scene as the lane engine reads it: its triangles flattened for the shading stage, its
+/// plastics and textures, and what the path tracer's settings ask; made once per render.
+pub struct LaneScene {
     tris: Vec<Tri>,
     /// Textured (front, back) reflectances, looked up lane by lane.
     textures: Vec<(Param<Rgb>, Param<Rgb>)>,
@@ -117,10 +118,10 @@ pub struct DiffuseScene {
     rr_depth: u32,
 }
 
-impl DiffuseScene {
+impl LaneScene {
     /// The scene's triangles, materials and lights, or why the prototype cannot render it with
     /// `settings`.
-    pub fn new(scene: &Scene, settings: &PathSettings) -> Result<DiffuseScene, Unsupported> {
+    pub fn new(scene: &Scene, settings: &PathSettings) -> Result<LaneScene, Unsupported> {
         let no = |why: &str| Err(Unsupported(why.to_string()));
         if !scene.media.is_empty() || scene.null_shapes > 0 {
             return no("the scene has media or null surfaces");
@@ -221,7 +222,7 @@ impl DiffuseScene {
                 scalar: false,
             });
         }
-        Ok(DiffuseScene {
+        Ok(LaneScene {
             tris,
             textures,
             plastics,
@@ -269,7 +270,7 @@ fn lane_shaded<'s>(scene: &'s Scene, prim: &'s Primitive) -> Option<LaneShaded<'
 /// Adds pass `pass` of the path tracer under `seed` to `film`, computed on `backend`.
 pub fn render_pass(
     scene: &Scene,
-    ds: &DiffuseScene,
+    ds: &LaneScene,
     seed: u64,
     pass: u64,
     backend: Backend,
@@ -290,7 +291,7 @@ pub fn render_pass(
 /// One film row's paths: the unit a lane kernel runs on.
 struct Row<'a> {
     scene: &'a Scene,
-    ds: &'a DiffuseScene,
+    ds: &'a LaneScene,
     seed: u64,
     pass: u64,
     y: u32,
@@ -560,7 +561,7 @@ fn surface(tris: &[Tri], idx: &[u32; LANES], b1: F8, b2: F8) -> (V8, V8) {
 #[inline(always)]
 fn textured_reflectance(
     scene: &Scene,
-    ds: &DiffuseScene,
+    ds: &LaneScene,
     idx: &[u32; LANES],
     mask: M8,
     back: M8,
@@ -690,7 +691,7 @@ fn draw<const K: usize>(paths: &mut Paths, start: usize, live: M8) -> [F8; K] {
 /// One bounce of lanes `start..start + 8`: emission found, a light sample (its shadow ray is
 /// traced after), the BSDF sample and roulette.
 #[inline(always)]
-fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &mut [Rgb], scene: &Scene) {
+fn shade(ds: &LaneScene, depth: u32, start: usize, paths: &mut Paths, out: &mut [Rgb], scene: &Scene) {
     let zero = F8::splat(0.0);
     let mut live = M8::from_fn(|i| paths.alive[start + i]);
     store3(&mut paths.shadow_l, start, V8::splat([0.0; 3]));
@@ -931,7 +932,7 @@ fn shade(ds: &DiffuseScene, depth: u32, start: usize, paths: &mut Paths, out: &m
 /// goes on as, if it does, for [`shade`] to store after the lanes' results.
 fn shade_scalar(
     scene: &Scene,
-    ds: &DiffuseScene,
+    ds: &LaneScene,
     depth: u32,
     i: usize,
     u: [f32; 6],
@@ -994,7 +995,7 @@ mod tests {
     }
 
     fn lanes(scene: &Scene, backend: Backend, passes: std::ops::Range<u64>) -> FilmSum {
-        let ds = DiffuseScene::new(scene, &PathSettings::from_scene(scene)).unwrap();
+        let ds = LaneScene::new(scene, &PathSettings::from_scene(scene)).unwrap();
         let mut film = FilmSum::new(scene.width(), scene.height());
         for pass in passes {
             render_pass(scene, &ds, 7, pass, backend, &mut film);
@@ -1163,7 +1164,7 @@ mod tests {
             };
             let scene = Scene::from_str(&text, &path, &[("res".to_string(), res.to_string())]).unwrap();
             assert!(scene.bvh.primitives().len() > 36 || name != "meshes.xml");
-            let ds = DiffuseScene::new(&scene, &PathSettings::from_scene(&scene)).unwrap();
+            let ds = LaneScene::new(&scene, &PathSettings::from_scene(&scene)).unwrap();
             assert_eq!(ds.plastics.is_empty(), !text.contains("roughplastic"), "{name}");
             let splats = ["tent", "gaussian"].map(|f| text.contains(&format!("<rfilter type=\"{f}\"/>")));
             assert!(splats == [false; 2] || !scene.filter.is_box(), "{name}");
@@ -1196,7 +1197,7 @@ mod tests {
     fn refuses_what_it_does_not_model() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/refs/fog.xml");
         let scene = Scene::load(&path, &[("res".to_string(), "16".to_string())]).unwrap();
-        let e = DiffuseScene::new(&scene, &PathSettings::from_scene(&scene))
+        let e = LaneScene::new(&scene, &PathSettings::from_scene(&scene))
             .err()
             .expect("media are refused")
             .to_string();
@@ -1222,7 +1223,7 @@ mod tests {
             "{:?}",
             scene.bsdfs[0]
         );
-        let e = DiffuseScene::new(&scene, &PathSettings::from_scene(&scene))
+        let e = LaneScene::new(&scene, &PathSettings::from_scene(&scene))
             .err()
             .expect("a plastic room is refused")
             .to_string();
