@@ -167,7 +167,7 @@ impl EnvmapLight {
         self.place_each([Some(wi)])[0].map_or(0.0, |p| self.pdf_at(p))
     }
 
-    /// [`EnvmapLight::pdf`] of a direction's [`EnvmapLight::place`].
+    /// [`EnvmapLight::pdf`] of a direction placed by [`EnvmapLight::place_each`].
     fn pdf_at(&self, (d, uv): (Vec3A, Vec2)) -> f32 {
         let sin = (d.x * d.x + d.z * d.z).sqrt();
         if sin <= 0.0 || self.rows.is_empty() {
