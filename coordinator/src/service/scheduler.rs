@@ -184,17 +184,20 @@ impl Scheduler {
         let window = window.max(1);
         let mut free = BTreeSet::new();
         let done: BTreeSet<(u64, u64)> = done.iter().copied().collect();
-        let mut cursor = 0;
+        // The ranges may overlap: a batch merged into the stored prefix whose record the
+        // coordinator had not yet forgotten when it stopped. Each pass counts once, or the job
+        // would count as done with passes never rendered, and wait for them forever.
+        let (mut cursor, mut completed) = (0, 0);
         for &(s, e) in &done {
             if s > cursor {
                 split_into(&mut free, cursor, s.min(next_start), window);
             }
+            completed += e.saturating_sub(s.max(cursor));
             cursor = cursor.max(e);
         }
         if next_start > cursor {
             split_into(&mut free, cursor, next_start, window);
         }
-        let completed = done.iter().map(|(s, e)| e - s).sum();
         self.jobs.insert(
             id,
             JobSched {
@@ -817,6 +820,26 @@ mod tests {
         let total: u64 = got.iter().map(|(a, b)| b - a).sum();
         assert_eq!(total, 20 - 6);
         assert_eq!(s.status(3).unwrap().0, JobState::Done);
+    }
+
+    /// After a restart between a checkpoint and forgetting the batches it merged, the stored
+    /// prefix [0, 16) and the batch [14, 16) overlap: the job is done once every other pass is
+    /// in, not two passes early (it once waited forever for passes it no longer handed out).
+    #[test]
+    fn overlapping_done_ranges_count_each_pass_once() {
+        let mut s = sched();
+        s.add_job(1, 40, 16, 18, &[(0, 16), (14, 16), (16, 17)], JobState::Running);
+        assert_eq!(s.status(1).unwrap().1, 17);
+        let mut handed = Vec::new();
+        while let Some(g) = s.lease("w", 0) {
+            assert_eq!(s.status(1).unwrap().0, JobState::Running, "done before {g:?}");
+            handed.extend(g.start..g.end);
+            s.complete(g.lease_id, 0).unwrap();
+        }
+        handed.sort();
+        assert_eq!(handed, (17..40).collect::<Vec<u64>>());
+        assert_eq!(s.status(1).unwrap().0, JobState::Done);
+        assert_eq!(s.status(1).unwrap().1, 40);
     }
 
     #[test]
