@@ -103,9 +103,13 @@ mod tests {
         );
     }
 
-    /// Worst error of `f` against `exact` over `xs`, in ulps of the result or in units of
-    /// 2^-24 (the absolute error that matters where the result is near zero), as in
-    /// [`a_turn_is_within_two_ulps_of_the_exact_sine_and_cosine`].
+    /// Error of `a` against the exact `e`: in ulps, or in units of 2^-24 near zero, where an
+    /// ulp of the result is far finer than the argument's own rounding.
+    fn err(a: f32, e: f64) -> f64 {
+        ulps(a, e).min((a as f64 - e).abs() * (1u32 << 24) as f64)
+    }
+
+    /// Worst [`err`] of `f` against `exact` over `xs`, and where.
     fn worst(xs: &[[f32; 2]], f: impl Fn(F8, F8) -> F8, exact: impl Fn(f64, f64) -> f64) -> (f64, [f32; 2]) {
         let mut worst = (0.0f64, [0.0; 2]);
         for c in xs.chunks(8) {
@@ -114,7 +118,7 @@ mod tests {
             let got = f(a, b);
             for (i, x) in c.iter().enumerate() {
                 let e = exact(x[0] as f64, x[1] as f64);
-                let err = ulps(got.0[i], e).min((got.0[i] as f64 - e).abs() * (1u32 << 24) as f64);
+                let err = err(got.0[i], e);
                 if err > worst.0 {
                     worst = (err, *x);
                 }
@@ -182,9 +186,6 @@ mod tests {
             let (s, c) = sincos_turn(u);
             for i in 0..8 {
                 let x = std::f64::consts::TAU * u.0[i] as f64;
-                // In ulps, or in units of 2^-24 near the zeros, where an ulp of the result
-                // is far finer than the angle's own rounding.
-                let err = |a: f32, e: f64| ulps(a, e).min((a as f64 - e).abs() * (1u32 << 24) as f64);
                 worst_s = worst_s.max(err(s.0[i], libm::sin(x)));
                 worst_c = worst_c.max(err(c.0[i], libm::cos(x)));
             }

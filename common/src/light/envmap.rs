@@ -31,7 +31,7 @@ pub struct EnvmapLight {
     pub sphere: SceneSphere,
 }
 
-/// `f` over `x` in groups of eight lanes, the last group padded with its first value.
+/// `f` over `x` in groups of eight lanes, the last group padded with its last value.
 ///
 /// Why lanes: a sample or a lookup takes two sines and cosines, or an arctangent and an arc
 /// cosine; libm's take them one by one, through branches, and were 3% of the living room's
