@@ -175,7 +175,8 @@ impl Accumulator {
         let mut merged = Merged::default();
         if start < self.prefix.passes {
             // Already merged. Cannot happen: a lease restored after a restart covers only
-            // passes not yet stored; this guards the invariant.
+            // passes not yet stored, and a restart skips stored batches the prefix already
+            // holds; this guards the invariant.
             return Ok(merged);
         }
         let odd = OddSums::sent_or_known(odd, start, &sum);

@@ -1158,6 +1158,12 @@ fn restore(store: &mut Store, row: &JobRow, limits: &Limits) -> Result<Restored,
     let ranges = store.batch_ranges(row.id).map_err(|e| e.to_string())?;
     for batch in ranges {
         let StoredBatch { start, end, .. } = batch;
+        if end <= acc.prefix_passes() {
+            // Merged into the stored prefix by a checkpoint the coordinator stopped after, before
+            // forgetting its batches: nothing to read or count again (the next checkpoint's
+            // `ForgetMerged` removes it).
+            continue;
+        }
         // A damaged batch is dropped: its passes are simply rendered again.
         let added = layout
             .load_batch(row.id, batch, row.width, row.height)
