@@ -6,6 +6,7 @@ use glam::Vec3A;
 use super::bvh4::{self, BinaryTree, WideNode};
 use super::packet::{self, Hits8, Rays8};
 use super::spatial_split;
+use super::tri4::{self, PACKED, Tri4};
 use super::{Aabb, Hit, PrimHit, Primitive, Ray};
 use crate::engine::lanes::{LANES, M8};
 
@@ -57,18 +58,25 @@ pub enum Backend {
 enum Accel {
     #[default]
     Empty,
-    Own(Vec<WideNode>),
+    Own(Own),
     #[cfg(feature = "obvhs")]
     Cw(Box<obvhs::cwbvh::CwBvh>),
     #[cfg(feature = "obvhs")]
     Bin(Box<obvhs::bvh2::Bvh2>),
 }
 
+/// Our tree: wide nodes, and the leaves of triangles packed in lanes (`tri4.rs`).
+#[derive(Clone, Debug)]
+struct Own {
+    nodes: Vec<WideNode>,
+    packs: Vec<Tri4>,
+}
+
 impl std::fmt::Debug for Accel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Accel::Empty => f.write_str("Empty"),
-            Accel::Own(n) => write!(f, "Own({} nodes)", n.len()),
+            Accel::Own(o) => write!(f, "Own({} nodes, {} packs)", o.nodes.len(), o.packs.len()),
             #[cfg(feature = "obvhs")]
             Accel::Cw(c) => write!(f, "Cwbvh({} nodes)", c.nodes.len()),
             #[cfg(feature = "obvhs")]
@@ -236,12 +244,18 @@ impl Bvh {
                 placed[slot] = placed[first[order[slot] as usize] as usize].clone();
             }
         }
-        let prims = placed
+        let prims: Vec<Primitive> = placed
             .into_iter()
             .map(|p| p.expect("every slot holds a primitive"))
             .collect();
+        let mut wide = bvh4::collapse(&Binary(&nodes));
+        // At most one pack a leaf: reserved, a doubling vector's peak cost the staircase 20 MB.
+        let mut packs = Vec::with_capacity(nodes.iter().filter(|n| n.count > 0).count());
+        bvh4::pack_leaves(&mut wide, |first, count| {
+            tri4::pack(&prims, first, count, &mut packs)
+        });
         Bvh {
-            accel: Accel::Own(bvh4::collapse(&Binary(&nodes))),
+            accel: Accel::Own(Own { nodes: wide, packs }),
             prims,
             distinct,
             bounds,
@@ -276,10 +290,10 @@ impl Bvh {
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<Hit> {
         match &self.accel {
             Accel::Empty => None,
-            Accel::Own(nodes) => {
+            Accel::Own(own) => {
                 let mut best: Option<Hit> = None;
                 let mut t_max = t_max;
-                self.traverse::<true>(nodes, ray, &mut t_max, |prim, h| {
+                self.traverse::<true>(own, ray, &mut t_max, |prim, h| {
                     best = Some(Hit {
                         t: h.t,
                         prim,
@@ -302,10 +316,10 @@ impl Bvh {
     pub fn occluded(&self, ray: &Ray, t_max: f32) -> bool {
         match &self.accel {
             Accel::Empty => false,
-            Accel::Own(nodes) => {
+            Accel::Own(own) => {
                 let mut found = false;
                 let mut t_max = t_max;
-                self.traverse::<false>(nodes, ray, &mut t_max, |_, _| {
+                self.traverse::<false>(own, ray, &mut t_max, |_, _| {
                     found = true;
                     true
                 });
@@ -323,7 +337,7 @@ impl Bvh {
     #[inline(always)]
     pub fn intersect8(&self, rays: &Rays8) -> Hits8 {
         match &self.accel {
-            Accel::Own(nodes) => packet::closest(nodes, &self.prims, rays),
+            Accel::Own(own) => packet::closest(&own.nodes, &own.packs, &self.prims, rays),
             _ => self.lane_by_lane(rays, |ray, t_max| self.intersect(ray, t_max)),
         }
     }
@@ -332,7 +346,7 @@ impl Bvh {
     #[inline(always)]
     pub fn occluded8(&self, rays: &Rays8) -> M8 {
         match &self.accel {
-            Accel::Own(nodes) => packet::occluded(nodes, &self.prims, rays),
+            Accel::Own(own) => packet::occluded(&own.nodes, &own.packs, &self.prims, rays),
             _ => M8::from_fn(|lane| {
                 rays.active.get(lane) && self.occluded(&rays.ray(lane), rays.t_max.0[lane])
             }),
@@ -356,12 +370,20 @@ impl Bvh {
     #[inline]
     fn traverse<const NEAREST_FIRST: bool>(
         &self,
-        nodes: &[WideNode],
+        own: &Own,
         ray: &Ray,
         t_max: &mut f32,
         mut on_hit: impl FnMut(u32, PrimHit) -> bool,
     ) {
-        bvh4::traverse::<NEAREST_FIRST>(nodes, ray, t_max, |first, count, t_max| {
+        bvh4::traverse::<NEAREST_FIRST>(&own.nodes, ray, t_max, |first, count, t_max| {
+            if count & PACKED as u32 != 0 {
+                return own.packs[first as usize]
+                    .intersect(ray, *t_max)
+                    .is_some_and(|(slot, h)| {
+                        *t_max = h.t;
+                        on_hit(slot, h)
+                    });
+            }
             for i in first as usize..(first + count) as usize {
                 if let Some(h) = self.prims[i].intersect(ray, *t_max) {
                     *t_max = h.t;
@@ -783,8 +805,8 @@ mod tests {
         let prims = progression(90);
         for backend in backends() {
             let bvh = Bvh::build_with(prims.clone(), backend);
-            if let Accel::Own(nodes) = &bvh.accel {
-                let d = bvh4::depth(nodes, 0);
+            if let Accel::Own(own) = &bvh.accel {
+                let d = bvh4::depth(&own.nodes, 0);
                 assert!(d < STACK, "depth {d}");
             }
             let mut s = Sampler::new(5, Stream::Camera, 0, 0);
@@ -905,7 +927,7 @@ mod tests {
                 b.primitives().iter().map(Primitive::shape).collect(),
                 b.distinct.clone(),
                 match &b.accel {
-                    Accel::Own(nodes) => format!("{nodes:?}"),
+                    Accel::Own(own) => format!("{own:?}"),
                     other => panic!("{other:?}"),
                 },
             )

@@ -9,6 +9,7 @@
 use arrayvec::ArrayVec;
 use glam::{Vec3A, Vec4};
 
+use super::tri4::PACKED;
 use super::{Aabb, Ray, gamma};
 
 /// Entries of the traversal stack. A wide node is never deeper than the binary node it was
@@ -36,10 +37,11 @@ pub(super) struct WideNode {
     max_x: Vec4,
     max_y: Vec4,
     max_z: Vec4,
-    /// Interior child: its wide node's index. Leaf child: its first primitive.
+    /// Interior child: its wide node's index. Leaf child: its first primitive, or if its count
+    /// is marked [`PACKED`], its pack of triangles.
     child: [u32; 4],
-    /// Leaf child: its primitive count (> 0). Interior child: 0. (Sixteen bits keep a node in
-    /// two cache lines: with 32 it took three.)
+    /// Leaf child: its primitive count (> 0), maybe marked [`PACKED`]. Interior child: 0.
+    /// (Sixteen bits keep a node in two cache lines: with 32 it took three.)
     count: [u16; 4],
     /// Lanes that hold a child, as a bit mask (empty lanes' boxes are never tested in).
     pub(super) used: u32,
@@ -140,7 +142,23 @@ pub(super) fn collapse(tree: &impl BinaryTree) -> Vec<WideNode> {
     nodes
 }
 
-/// Traversal of `nodes`: `test(first, count, t_max)` tests a leaf's primitives, shrinking
+/// Hands each leaf child's (first, count) to `pack`; where it returns an index, the child
+/// becomes that pack's, its count marked [`PACKED`].
+pub(super) fn pack_leaves(nodes: &mut [WideNode], mut pack: impl FnMut(u32, u16) -> Option<u32>) {
+    for n in nodes {
+        for lane in 0..4 {
+            if n.used & (1 << lane) != 0
+                && n.count[lane] > 0
+                && let Some(index) = pack(n.child[lane], n.count[lane])
+            {
+                n.child[lane] = index;
+                n.count[lane] |= PACKED;
+            }
+        }
+    }
+}
+
+/// Traversal of `nodes`: `test(child, count, t_max)` tests a leaf child's primitives, shrinking
 /// `t_max` to any hit, and returns true to stop. `NEAREST_FIRST` visits a node's children front
 /// to back, which the closest hit needs; a query for any hit (a shadow ray) skips the sorting,
 /// as its answer does not depend on the order (docs/benchmarks.md, "Traversal order", has

@@ -11,6 +11,7 @@ mod packet;
 mod ray;
 mod spatial_split;
 mod sphere;
+mod tri4;
 mod triangle;
 
 pub use aabb::Aabb;

@@ -10,6 +10,7 @@
 use arrayvec::ArrayVec;
 
 use super::bvh4::{WIDE_STACK, WideNode};
+use super::tri4::{Leaf, LeafPrim, Tri4};
 use super::{Hit, Primitive, Ray, gamma};
 use crate::engine::lanes::{F8, LANES, M8, V8};
 
@@ -101,14 +102,12 @@ trait Query {
     /// Whether children are visited front to back (closest hits need it).
     const NEAREST_FIRST: bool;
 
-    /// Tests primitives `first..first + count` against the lanes of `mask`, shrinking `t_max`
-    /// to their hits; returns the lanes that are done (blocked shadow rays).
-    fn leaf(
+    /// Tests a leaf's primitives (as `tri4::leaf` lists them) against the lanes of `mask`,
+    /// shrinking `t_max` to their hits; returns the lanes that are done (blocked shadow rays).
+    fn leaf<'a>(
         &mut self,
-        prims: &[Primitive],
+        prims: impl Iterator<Item = (u32, LeafPrim<'a>)>,
         rays: &Rays8,
-        first: u32,
-        count: u32,
         mask: M8,
         t_max: &mut F8,
     ) -> M8;
@@ -121,19 +120,17 @@ impl Query for Closest {
     const NEAREST_FIRST: bool = true;
 
     #[inline(always)]
-    fn leaf(
+    fn leaf<'a>(
         &mut self,
-        prims: &[Primitive],
+        prims: impl Iterator<Item = (u32, LeafPrim<'a>)>,
         rays: &Rays8,
-        first: u32,
-        count: u32,
         mask: M8,
         t_max: &mut F8,
     ) -> M8 {
         let hits = &mut self.0;
-        for i in first..first + count {
-            match &prims[i as usize] {
-                Primitive::Triangle(tri) => {
+        for (i, prim) in prims {
+            match prim {
+                LeafPrim::Triangle(tri) => {
                     let (hit, t, b1, b2) = triangle(tri, rays, mask, *t_max);
                     hits.found = hits.found | hit;
                     hits.t = hit.select(t, hits.t);
@@ -146,7 +143,7 @@ impl Query for Closest {
                         }
                     }
                 }
-                other => {
+                LeafPrim::Other(other) => {
                     scalar_lanes(other, rays, mask, *t_max, |lane, h| {
                         let h = Hit {
                             t: h.t,
@@ -172,19 +169,17 @@ impl Query for Occlusion {
     const NEAREST_FIRST: bool = false;
 
     #[inline(always)]
-    fn leaf(
+    fn leaf<'a>(
         &mut self,
-        prims: &[Primitive],
+        prims: impl Iterator<Item = (u32, LeafPrim<'a>)>,
         rays: &Rays8,
-        first: u32,
-        count: u32,
         mut mask: M8,
         t_max: &mut F8,
     ) -> M8 {
-        for i in first..first + count {
-            let hit = match &prims[i as usize] {
-                Primitive::Triangle(tri) => triangle(tri, rays, mask, *t_max).0,
-                other => scalar_lanes(other, rays, mask, *t_max, |_, _| {}),
+        for (_, prim) in prims {
+            let hit = match prim {
+                LeafPrim::Triangle(tri) => triangle(tri, rays, mask, *t_max).0,
+                LeafPrim::Other(other) => scalar_lanes(other, rays, mask, *t_max, |_, _| {}),
             };
             self.0 = self.0 | hit;
             mask = mask & !hit;
@@ -198,17 +193,17 @@ impl Query for Occlusion {
 
 /// Closest hits of `rays` in `nodes` over `prims`.
 #[inline(always)]
-pub(super) fn closest(nodes: &[WideNode], prims: &[Primitive], rays: &Rays8) -> Hits8 {
+pub(super) fn closest(nodes: &[WideNode], packs: &[Tri4], prims: &[Primitive], rays: &Rays8) -> Hits8 {
     let mut q = Closest(Hits8::none());
-    traverse(nodes, prims, rays, &mut q);
+    traverse(nodes, packs, prims, rays, &mut q);
     q.0
 }
 
 /// Lanes of `rays` that something blocks.
 #[inline(always)]
-pub(super) fn occluded(nodes: &[WideNode], prims: &[Primitive], rays: &Rays8) -> M8 {
+pub(super) fn occluded(nodes: &[WideNode], packs: &[Tri4], prims: &[Primitive], rays: &Rays8) -> M8 {
     let mut q = Occlusion(M8::splat(false));
-    traverse(nodes, prims, rays, &mut q);
+    traverse(nodes, packs, prims, rays, &mut q);
     q.0
 }
 
@@ -233,14 +228,17 @@ fn scalar_lanes(
     hit
 }
 
-/// `Triangle::intersect` (Möller–Trumbore) in lanes, operation for operation: the lanes of
-/// `mask` it hits in (0, t_max), with their (t, b1, b2).
+/// `Triangle::intersect` (Möller–Trumbore) in lanes, operation for operation, on a triangle
+/// as its first vertex and two edges: the lanes of `mask` it hits in (0, t_max), with their
+/// (t, b1, b2).
 #[inline(always)]
-fn triangle(tri: &super::Triangle, rays: &Rays8, mask: M8, t_max: F8) -> (M8, F8, F8, F8) {
+fn triangle(tri: [glam::Vec3A; 3], rays: &Rays8, mask: M8, t_max: F8) -> (M8, F8, F8, F8) {
     let zero = F8::splat(0.0);
-    let p0 = V8::splat(tri.p[0].into());
-    let e1 = V8::splat((tri.p[1] - tri.p[0]).into());
-    let e2 = V8::splat((tri.p[2] - tri.p[0]).into());
+    let (p0, e1, e2) = (
+        V8::splat(tri[0].into()),
+        V8::splat(tri[1].into()),
+        V8::splat(tri[2].into()),
+    );
     let pv = rays.d.cross(e2);
     let det = e1.dot(pv);
     let inv = 1.0 / det;
@@ -259,7 +257,7 @@ fn triangle(tri: &super::Triangle, rays: &Rays8, mask: M8, t_max: F8) -> (M8, F8
 /// The packet traversal for query `q`; lanes it reports done leave the packet. Children are
 /// visited by their nearest lane's entry, front to back, if the query needs it.
 #[inline(always)]
-fn traverse<Q: Query>(nodes: &[WideNode], prims: &[Primitive], rays: &Rays8, q: &mut Q) {
+fn traverse<Q: Query>(nodes: &[WideNode], packs: &[Tri4], prims: &[Primitive], rays: &Rays8, q: &mut Q) {
     let mut t_max = rays.t_max;
     let t_max = &mut t_max;
     let zero = F8::splat(0.0);
@@ -279,7 +277,8 @@ fn traverse<Q: Query>(nodes: &[WideNode], prims: &[Primitive], rays: &Rays8, q: 
     };
     loop {
         if cur.count > 0 {
-            done = done | q.leaf(prims, rays, cur.child, cur.count as u32, cur.mask, t_max);
+            let leaf = Leaf::new(packs, prims, cur.child, cur.count as u32);
+            done = done | q.leaf(leaf, rays, cur.mask, t_max);
             if !(!done).any() {
                 return;
             }
