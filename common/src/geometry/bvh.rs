@@ -844,12 +844,8 @@ mod tests {
                 let (a, b) = (point(), point());
                 let side = (b - a).cross(Vec3A::Y).normalize_or_zero() * 0.05;
                 Primitive::Triangle(crate::geometry::Triangle {
-                    p: [a, b, a + side],
-                    n: None,
-                    uv: None,
-                    attr: None,
                     shape: i as u32,
-                    flip: false,
+                    ..crate::geometry::Triangle::bare([a, b, a + side])
                 })
             })
             .collect()

@@ -143,16 +143,7 @@ mod tests {
         ];
         corners
             .iter()
-            .map(|c| {
-                Primitive::Triangle(Triangle {
-                    p: c.map(|p| Vec3A::from(m.transform_point3(p))),
-                    n: None,
-                    uv: None,
-                    attr: None,
-                    shape: 0,
-                    flip: false,
-                })
-            })
+            .map(|c| Primitive::Triangle(Triangle::bare(c.map(|p| Vec3A::from(m.transform_point3(p))))))
             .collect()
     }
 

@@ -291,14 +291,7 @@ mod tests {
     use crate::sampling::{Sampler, Stream};
 
     fn tri(p: [Vec3A; 3]) -> Primitive {
-        Primitive::Triangle(Triangle {
-            p,
-            n: None,
-            uv: None,
-            attr: None,
-            shape: 0,
-            flip: false,
-        })
+        Primitive::Triangle(Triangle::bare(p))
     }
 
     #[test]

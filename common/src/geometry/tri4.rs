@@ -10,6 +10,7 @@
 //! lane, the first of equals, is then the hit the scalar loop over the leaf finds, which keeps
 //! closest hits, and so images, as they were.
 
+use arrayvec::ArrayVec;
 use glam::{Vec3A, Vec4};
 
 use super::{PrimHit, Primitive, Ray, Triangle};
@@ -123,17 +124,19 @@ impl Tri4 {
     }
 }
 
-/// Packs every leaf of triangles only; leaves with anything else stay as slots.
+/// The leaf of slots `first..first + count` packed onto `packs`, with its pack's index, if it
+/// holds at most four primitives, all triangles (other leaves stay as slots).
 pub(super) fn pack(prims: &[Primitive], first: u32, count: u16, packs: &mut Vec<Tri4>) -> Option<u32> {
     let slots = &prims[first as usize..][..count as usize];
-    let tris: Vec<&Triangle> = slots
+    let tris: ArrayVec<&Triangle, 4> = slots
         .iter()
+        .take(4)
         .map_while(|p| match p {
             Primitive::Triangle(t) => Some(t),
             _ => None,
         })
         .collect();
-    if tris.len() < slots.len() || tris.len() > 4 {
+    if tris.len() < slots.len() {
         return None;
     }
     packs.push(Tri4::new(first, &tris));
@@ -195,17 +198,6 @@ mod tests {
     use super::*;
     use crate::sampling::{Sampler, Stream};
 
-    fn tri(p: [Vec3A; 3]) -> Triangle {
-        Triangle {
-            p,
-            n: None,
-            uv: None,
-            attr: None,
-            shape: 0,
-            flip: false,
-        }
-    }
-
     /// Four triangles round a point, rays at them from all sides, some through shared edges
     /// and vertices (where two lanes tie): each pack's hit is the scalar loop's, bit for bit.
     #[test]
@@ -218,7 +210,7 @@ mod tests {
             let shared = c + Vec3A::new(r(), r(), r());
             let tris: Vec<Triangle> = (0..1 + case % 4)
                 .map(|_| {
-                    tri([
+                    Triangle::bare([
                         shared,
                         c + Vec3A::new(r(), r(), r()),
                         c + Vec3A::new(r(), r(), r()),

@@ -23,6 +23,19 @@ pub struct Triangle {
 }
 
 impl Triangle {
+    /// A triangle of shape 0 with no normals, texture coordinates or attribute: the tests'.
+    #[cfg(test)]
+    pub(crate) fn bare(p: [Vec3A; 3]) -> Triangle {
+        Triangle {
+            p,
+            n: None,
+            uv: None,
+            attr: None,
+            shape: 0,
+            flip: false,
+        }
+    }
+
     /// Bounds.
     pub fn bounds(&self) -> Aabb {
         Aabb::point(self.p[0]).grow(self.p[1]).grow(self.p[2])
@@ -144,18 +157,11 @@ mod tests {
     use super::*;
 
     fn tri() -> Triangle {
-        Triangle {
-            p: [
-                Vec3A::new(0.0, 0.0, 0.0),
-                Vec3A::new(1.0, 0.0, 0.0),
-                Vec3A::new(0.0, 1.0, 0.0),
-            ],
-            n: None,
-            uv: None,
-            attr: None,
-            shape: 0,
-            flip: false,
-        }
+        Triangle::bare([
+            Vec3A::new(0.0, 0.0, 0.0),
+            Vec3A::new(1.0, 0.0, 0.0),
+            Vec3A::new(0.0, 1.0, 0.0),
+        ])
     }
 
     #[test]
