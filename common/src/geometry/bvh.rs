@@ -375,16 +375,16 @@ impl Bvh {
         t_max: &mut f32,
         mut on_hit: impl FnMut(u32, PrimHit) -> bool,
     ) {
-        bvh4::traverse::<NEAREST_FIRST>(&own.nodes, ray, t_max, |first, count, t_max| {
+        bvh4::traverse::<NEAREST_FIRST>(&own.nodes, ray, t_max, |child, count, t_max| {
             if count & PACKED as u32 != 0 {
-                return own.packs[first as usize]
+                return own.packs[child as usize]
                     .intersect(ray, *t_max)
                     .is_some_and(|(slot, h)| {
                         *t_max = h.t;
                         on_hit(slot, h)
                     });
             }
-            for i in first as usize..(first + count) as usize {
+            for i in child as usize..(child + count) as usize {
                 if let Some(h) = self.prims[i].intersect(ray, *t_max) {
                     *t_max = h.t;
                     if on_hit(i as u32, h) {

@@ -80,7 +80,7 @@ impl WideNode {
         ]
     }
 
-    /// Child `lane`: (wide node, 0) or (first primitive, count).
+    /// Child `lane`: (wide node, 0), (first primitive, count) or (pack, count | [`PACKED`]).
     #[inline(always)]
     pub(super) fn child(&self, lane: usize) -> (u32, u16) {
         (self.child[lane], self.count[lane])

@@ -102,7 +102,7 @@ trait Query {
     /// Whether children are visited front to back (closest hits need it).
     const NEAREST_FIRST: bool;
 
-    /// Tests a leaf's primitives (as `tri4::leaf` lists them) against the lanes of `mask`,
+    /// Tests a leaf's primitives (as [`Leaf`] lists them) against the lanes of `mask`,
     /// shrinking `t_max` to their hits; returns the lanes that are done (blocked shadow rays).
     fn leaf<'a>(
         &mut self,
